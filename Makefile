@@ -1,0 +1,27 @@
+# skymesh: `make demo` and `make test` bootstrap .venv from nothing (Python >= 3.11 on PATH).
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test lint clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "skymesh needs Python >= 3.11")'
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[test]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/skymesh demo
+
+test: $(STAMP)
+	$(BIN)/ruff check agent fusion perception tasking mesh_sim tests
+	$(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check agent fusion perception tasking mesh_sim tests
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache
