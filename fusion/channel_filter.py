@@ -1,0 +1,183 @@
+"""Channel filters: per-neighbour common information, so that nothing is counted twice.
+
+Merino (2.26)-(2.28), Alg. 3.4 and (3.39)-(3.42) (after Bourgault & Durrant-Whyte, 2004): when node
+``i`` receives neighbour ``j``'s belief it adds ``bel_j - bel_ij``, where ``bel_ij`` is the information
+the two already share. This module is generic: it works for any belief that implements the algebra
+``fuse``, ``remove``, ``intersect``/``scaled``, an ``epoch`` (``None`` for timeless beliefs) and
+``advanced_to(epoch)`` — Gaussians, trajectories, and later grids.
+
+**Acknowledged common information.** Merino's bookkeeping ("on send, ``bel_ij = bel_i``") assumes the
+message arrives. Here a node assumes a neighbour holds only what the neighbour has *acknowledged*: every
+message carries the sequence number of the last message its sender received from the receiver. On a
+tree the common information splits into two disjoint parts,
+
+* ``B``, the neighbour-side information this node holds — what it took from the neighbour's last fused
+  message (it starts as the common prior), and
+* ``A``, this node's side information that the neighbour holds — the node-side part of the
+  acknowledged message, ``A = sent_a - B_a`` where ``sent_a`` and ``B_a`` are recorded at send time.
+
+Receiving ``m`` with acknowledgement ``a``: ``fused = local + m - (B + A)`` and ``B <- m - A``. A lost
+message in either direction leaves both parts valid, so loss can never make the result overconfident.
+
+Policies: ``exact`` (channel filters; optimal on trees), ``ci`` (covariance intersection only),
+``hybrid`` (exact on edges the caller knows to be tree edges and whose common information is
+synchronised, intersection otherwise) and ``naive`` (treat every message as independent evidence —
+for comparison only: it double-counts). Whenever the exact result would not be positive semi-definite,
+or the acknowledged message is no longer in the history, the channel falls back to intersection and
+stays there (it is *desynchronised*) until :meth:`ChannelFilter.reset` starts it afresh.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+from fusion.covariance_intersection import ci
+
+
+class Policy(StrEnum):
+    NAIVE = "naive"
+    EXACT = "exact"
+    CI = "ci"
+    HYBRID = "hybrid"
+
+
+@dataclass
+class Received:
+    """The outcome of one receive: the fused belief, how it was fused, and why (for fallbacks)."""
+
+    fused: object
+    method: str  # "exact", "ci", "naive" or "stale"
+    reason: str | None = None
+
+
+@dataclass
+class _Channel:
+    inbound: object  # B: neighbour-side information held here (includes the common prior)
+    sent: OrderedDict = field(default_factory=OrderedDict)  # seq -> (local at send, B at send)
+    synchronized: bool = True
+    last_seq: int | None = None
+
+
+def _intersect_det(a, b):
+    return ci([a, b], "det")
+
+
+class ChannelFilter:
+    """The channel filters of one node, one per neighbour."""
+
+    def __init__(
+        self,
+        prior,
+        policy: Policy | str = Policy.HYBRID,
+        intersect: Callable | None = None,
+        history: int = 64,
+    ):
+        self.prior = prior
+        self.policy = Policy(policy)
+        self.intersect = intersect or _intersect_det
+        if history < 1:
+            raise ValueError(f"history must hold at least one message, got {history}")
+        self.history = history
+        self._channels: dict[Hashable, _Channel] = {}
+
+    # -- bookkeeping ------------------------------------------------------------------------------
+    def neighbours(self) -> list:
+        return list(self._channels)
+
+    def is_synchronized(self, neighbour) -> bool:
+        return self._channel(neighbour).synchronized
+
+    def reset(self, neighbour) -> None:
+        """Start the channel afresh: only the common prior is assumed shared.
+
+        Correct when the neighbour is known to hold nothing of ours (a new neighbour, or one that
+        restarted); after a loop or an unknown exchange the channel must stay desynchronised instead."""
+        self._channels[neighbour] = _Channel(inbound=self.prior)
+
+    def desynchronize(self, neighbour) -> None:
+        """Mark the common information with ``neighbour`` as unknown: fuse by intersection from now on."""
+        self._channel(neighbour).synchronized = False
+
+    def _channel(self, neighbour) -> _Channel:
+        if neighbour not in self._channels:
+            self.reset(neighbour)
+        return self._channels[neighbour]
+
+    # -- the protocol -----------------------------------------------------------------------------
+    def on_send(self, neighbour, local, seq: int) -> None:
+        """Record what is sent to ``neighbour`` as message ``seq`` (Merino (3.38), deferred to the ack)."""
+        ch = self._channel(neighbour)
+        if self.policy in (Policy.CI, Policy.NAIVE):
+            return
+        ch.sent[seq] = (local, ch.inbound)
+        while len(ch.sent) > self.history:
+            ch.sent.popitem(last=False)
+
+    def on_receive(
+        self,
+        neighbour,
+        local,
+        received,
+        acked_seq: int | None,
+        seq: int | None = None,
+        tree_edge: bool = True,
+    ) -> Received:
+        """Fuse ``received`` from ``neighbour`` into ``local``.
+
+        ``acked_seq`` is the last of our messages the neighbour had received when it sent this one
+        (``None``: none yet); ``seq`` is the message's own sequence number (older or repeated messages
+        are ignored); ``tree_edge`` says whether this link is known to be a tree edge (a bridge of the
+        communication graph) — ``hybrid`` uses intersection on any other edge."""
+        ch = self._channel(neighbour)
+        if seq is not None and ch.last_seq is not None and seq <= ch.last_seq:
+            return Received(local, "stale", f"message {seq} is not newer than {ch.last_seq}")
+        if seq is not None:
+            ch.last_seq = seq
+        epoch = _newest_epoch(local, received)
+        local, received = local.advanced_to(epoch), received.advanced_to(epoch)
+
+        if self.policy is Policy.NAIVE:
+            return Received(local.fuse(received).remove(self.prior.advanced_to(epoch)), "naive")
+        if self.policy is Policy.CI:
+            return Received(self.intersect(local, received), "ci")
+        if self.policy is Policy.HYBRID and not tree_edge:
+            ch.synchronized = False
+            return Received(self.intersect(local, received), "ci", "not a tree edge")
+        if not ch.synchronized:
+            return Received(self.intersect(local, received), "ci", "common information unknown")
+        return self._exact(ch, local, received, acked_seq, epoch)
+
+    def _exact(self, ch: _Channel, local, received, acked_seq, epoch) -> Received:
+        inbound = ch.inbound.advanced_to(epoch)
+        if acked_seq is None:
+            ours_there = None
+        elif acked_seq in ch.sent:
+            sent_local, sent_inbound = ch.sent[acked_seq]
+            ours_there = (sent_local.advanced_to(epoch), sent_inbound.advanced_to(epoch))
+        else:
+            ch.synchronized = False
+            return Received(
+                self.intersect(local, received), "ci", f"acknowledged message {acked_seq} is not in the history"
+            )
+        try:
+            if ours_there is None:
+                common, new_inbound = inbound, received
+            else:
+                sent_local, sent_inbound = ours_there
+                common = inbound.fuse(sent_local).remove(sent_inbound)  # B + A
+                new_inbound = received.fuse(sent_inbound).remove(sent_local)  # m - A
+            fused = local.fuse(received).remove(common)
+        except ValueError as err:
+            ch.synchronized = False
+            return Received(self.intersect(local, received), "ci", f"exact fusion failed: {err}")
+        ch.inbound = new_inbound
+        return Received(fused, "exact")
+
+
+def _newest_epoch(a, b):
+    if a.epoch is None or b.epoch is None:
+        return None
+    return max(a.epoch, b.epoch)

@@ -1,0 +1,34 @@
+"""The information filter and the extended information filter on :class:`~fusion.gaussian.Gaussian`.
+
+* :func:`predict` — Merino Alg. 3.2 lines 1-3 with a motion model from ``fusion.motion``.
+* :func:`update` — Merino (3.17)-(3.18) for a linear model (``PositionMeasurement``).
+* :func:`eif_update` — the extended information filter update, Merino (3.49)-(3.52):
+  ``Y += H^T R^-1 H`` and ``y += H^T R^-1 [z - h(mu) + H mu]`` with ``H`` the Jacobian at ``mu``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fusion.gaussian import Gaussian
+
+
+def predict(belief: Gaussian, model, dt: float) -> Gaussian:
+    """Predict ``belief`` over ``dt`` seconds with a motion model (Merino Alg. 3.2, (3.11)-(3.13))."""
+    return belief.predict(model.transition(dt), model.noise(dt), model.inverse_transition(dt))
+
+
+def update(belief: Gaussian, model, z) -> Gaussian:
+    """Linear update (Merino (3.17)-(3.18)); ``model`` must be linear (it has a constant ``H``)."""
+    return belief.update(model.jacobian(), model.R_inv, np.asarray(z, dtype=float))
+
+
+def eif_update(belief: Gaussian, model, z, linearization_point=None) -> Gaussian:
+    """Extended information filter update (Merino (3.52)).
+
+    ``linearization_point`` defaults to the belief's mean; pass it explicitly when the belief is not
+    yet fully observable (e.g. a bearing-only track initialised from a prior along a ray)."""
+    mu = belief.mean if linearization_point is None else np.asarray(linearization_point, dtype=float)
+    H = model.jacobian(mu)
+    innovation = model.residual(z, model.h(mu))
+    return belief.update(H, model.R_inv, innovation + H @ mu)

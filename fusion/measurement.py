@@ -1,0 +1,135 @@
+"""Measurement models ``z = h(x) + v``, ``v ~ N(0, R)``, for the (extended) information filter.
+
+Every model exposes ``h(x)``, ``jacobian(x)``, ``R``, ``R_inv`` and ``residual(z, z_hat)`` (which wraps
+angles). Target positions are the first ``spatial_dims`` entries of the state (Merino (3.60)-(3.61)).
+Frames follow DESIGN.md §3: local NED, so azimuth is measured from north (x) towards east (y), and
+elevation is the angle of the line of sight above the horizontal plane (negative when looking down).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fusion import validation
+
+
+def wrap_angle(angle):
+    """Wrap an angle (or an array of angles) to ``[-pi, pi)``."""
+    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+class _Model:
+    """Shared plumbing: the noise matrix, its inverse, and the selection of position components."""
+
+    def __init__(self, state_dim: int, spatial_dims: int, R):
+        if state_dim < spatial_dims:
+            raise ValueError(f"state dimension {state_dim} is smaller than the {spatial_dims} position axes")
+        self.state_dim = state_dim
+        self.spatial_dims = spatial_dims
+        self.R = validation.as_pd(R, "measurement noise R", self.dim)
+        self.R_inv = np.linalg.inv(self.R)
+
+    dim: int
+
+    def residual(self, z, z_hat) -> np.ndarray:
+        return np.asarray(z, dtype=float) - z_hat
+
+    def _pad(self, J_position: np.ndarray) -> np.ndarray:
+        H = np.zeros((J_position.shape[0], self.state_dim))
+        H[:, : self.spatial_dims] = J_position
+        return H
+
+
+class PositionMeasurement(_Model):
+    """A direct (geolocated) position measurement: ``H = [I 0]`` (Merino (3.60)-(3.61))."""
+
+    def __init__(self, state_dim: int, R, spatial_dims: int = 3):
+        self.dim = spatial_dims
+        super().__init__(state_dim, spatial_dims, R)
+        self.H = self._pad(np.eye(spatial_dims))
+
+    def h(self, x) -> np.ndarray:
+        return np.asarray(x, dtype=float)[: self.spatial_dims]
+
+    def jacobian(self, x=None) -> np.ndarray:
+        return self.H
+
+
+class Bearing2D(_Model):
+    """Azimuth from a sensor at ``sensor`` (x north, y east): ``z = atan2(y - s_y, x - s_x)``."""
+
+    dim = 1
+
+    def __init__(self, state_dim: int, sensor, sigma: float, spatial_dims: int = 2):
+        self.sensor = validation.as_vector(sensor, "sensor position")[:2]
+        super().__init__(state_dim, spatial_dims, np.array([[sigma**2]]))
+
+    def _delta(self, x):
+        d = np.asarray(x, dtype=float)[:2] - self.sensor
+        rho2 = float(d @ d)
+        if rho2 < 1e-12:
+            raise ValueError("the bearing is undefined: the target is at the sensor position")
+        return d, rho2
+
+    def h(self, x) -> np.ndarray:
+        d, _ = self._delta(x)
+        return np.array([np.arctan2(d[1], d[0])])
+
+    def jacobian(self, x) -> np.ndarray:
+        d, rho2 = self._delta(x)
+        J = np.zeros((1, self.spatial_dims))
+        J[0, :2] = [-d[1] / rho2, d[0] / rho2]
+        return self._pad(J)
+
+    def residual(self, z, z_hat) -> np.ndarray:
+        return wrap_angle(np.asarray(z, dtype=float) - z_hat)
+
+
+class Bearing3D(_Model):
+    """Azimuth and elevation of the line of sight from ``sensor`` (NED):
+    ``az = atan2(dy, dx)``, ``el = atan2(-dz, hypot(dx, dy))``. ``R`` is 2x2 (radians^2)."""
+
+    dim = 2
+
+    def __init__(self, state_dim: int, sensor, R):
+        self.sensor = validation.as_vector(sensor, "sensor position", 3)
+        super().__init__(state_dim, 3, R)
+
+    def _delta(self, x):
+        d = np.asarray(x, dtype=float)[:3] - self.sensor
+        rho2 = d[0] ** 2 + d[1] ** 2
+        if rho2 < 1e-12:
+            raise ValueError("azimuth is undefined: the target is straight above or below the sensor")
+        return d, rho2
+
+    def h(self, x) -> np.ndarray:
+        d, rho2 = self._delta(x)
+        return np.array([np.arctan2(d[1], d[0]), np.arctan2(-d[2], np.sqrt(rho2))])
+
+    def jacobian(self, x) -> np.ndarray:
+        d, rho2 = self._delta(x)
+        rho = np.sqrt(rho2)
+        r2 = rho2 + d[2] ** 2
+        J = np.array(
+            [
+                [-d[1] / rho2, d[0] / rho2, 0.0],
+                [d[2] * d[0] / (rho * r2), d[2] * d[1] / (rho * r2), -rho / r2],
+            ]
+        )
+        return self._pad(J)
+
+    def residual(self, z, z_hat) -> np.ndarray:
+        r = np.asarray(z, dtype=float) - z_hat
+        return np.array([wrap_angle(r[0]), r[1]])
+
+
+def los_to_azel(line_of_sight) -> np.ndarray:
+    """Azimuth/elevation of a line-of-sight vector in NED (it need not be unit length)."""
+    v = validation.as_vector(line_of_sight, "line of sight", 3)
+    return np.array([np.arctan2(v[1], v[0]), np.arctan2(-v[2], np.hypot(v[0], v[1]))])
+
+
+def azel_to_los(azel) -> np.ndarray:
+    """Unit line-of-sight vector in NED for an azimuth/elevation pair."""
+    az, el = validation.as_vector(azel, "azimuth/elevation", 2)
+    return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])

@@ -1,0 +1,135 @@
+"""Linear motion models ``x_t = F(dt) x_{t-1} + w``, ``w ~ N(0, Q(dt))``.
+
+State ordering follows Merino (3.54): all positions, then all velocities (then all accelerations),
+e.g. ``(x, y, z, vx, vy, vz)`` for a 3-D constant-velocity target.
+
+* :class:`ConstantVelocity` — discretised white-noise acceleration, Merino (3.58)-(3.59).
+* :class:`Static` — ``F = I``, ``Q = 0`` (Merino §3.2.1).
+* :class:`Singer` — exponentially correlated acceleration (Singer, 1970), discretised exactly with
+  Van Loan's matrix exponential (Van Loan, 1978), which also serves as the independent check of the
+  constant-velocity closed form in the tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+
+@dataclass(frozen=True)
+class ConstantVelocity:
+    """White-noise acceleration with power spectral density ``q`` [m^2/s^3] per axis.
+
+    ``F = [[I, dt I], [0, I]]`` (3.58) and ``Q = q [[dt^3/3 I, dt^2/2 I], [dt^2/2 I, dt I]]`` (3.59).
+    """
+
+    spatial_dims: int = 3
+    q: float = 0.1  # chosen here: a walking-pace target (about 0.3 m/s of velocity change per sqrt(s))
+
+    def __post_init__(self):
+        _check_positive(self.spatial_dims, "spatial_dims")
+        if not np.isfinite(self.q) or self.q < 0:
+            raise ValueError(f"q must be a finite non-negative spectral density, got {self.q}")
+
+    @property
+    def dim(self) -> int:
+        return 2 * self.spatial_dims
+
+    def transition(self, dt: float) -> np.ndarray:
+        return np.kron(np.array([[1.0, dt], [0.0, 1.0]]), np.eye(self.spatial_dims))
+
+    def inverse_transition(self, dt: float) -> np.ndarray:
+        return self.transition(-dt)
+
+    def noise(self, dt: float) -> np.ndarray:
+        _check_dt(dt)
+        block = np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
+        return self.q * np.kron(block, np.eye(self.spatial_dims))
+
+
+@dataclass(frozen=True)
+class Static:
+    """A state that does not move: ``F = I``, ``Q = 0`` (Merino §3.2.1)."""
+
+    dim: int = 3
+
+    def __post_init__(self):
+        _check_positive(self.dim, "dim")
+
+    def transition(self, dt: float) -> np.ndarray:
+        return np.eye(self.dim)
+
+    def inverse_transition(self, dt: float) -> np.ndarray:
+        return np.eye(self.dim)
+
+    def noise(self, dt: float) -> np.ndarray:
+        return np.zeros((self.dim, self.dim))
+
+
+@dataclass(frozen=True)
+class Singer:
+    """Singer manoeuvring model: per axis ``da/dt = -alpha a + w``, ``E[w w] = 2 alpha sigma_m^2``.
+
+    ``alpha`` is the inverse manoeuvre time constant [1/s] and ``sigma_m`` the RMS acceleration
+    [m/s^2]; both defaults are chosen here (a ground vehicle turning every ~10 s at ~1 m/s^2)."""
+
+    spatial_dims: int = 3
+    alpha: float = 0.1
+    sigma_m: float = 1.0
+
+    def __post_init__(self):
+        _check_positive(self.spatial_dims, "spatial_dims")
+        if not (np.isfinite(self.alpha) and self.alpha > 0):
+            raise ValueError(f"alpha must be positive, got {self.alpha}")
+        if not (np.isfinite(self.sigma_m) and self.sigma_m >= 0):
+            raise ValueError(f"sigma_m must be non-negative, got {self.sigma_m}")
+
+    @property
+    def dim(self) -> int:
+        return 3 * self.spatial_dims
+
+    def _continuous(self) -> tuple[np.ndarray, np.ndarray]:
+        A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -self.alpha]])
+        Qc = np.zeros((3, 3))
+        Qc[2, 2] = 2.0 * self.alpha * self.sigma_m**2
+        return A, Qc
+
+    def transition(self, dt: float) -> np.ndarray:
+        A, _ = self._continuous()
+        return np.kron(scipy.linalg.expm(A * dt), np.eye(self.spatial_dims))
+
+    def inverse_transition(self, dt: float) -> np.ndarray:
+        return self.transition(-dt)
+
+    def noise(self, dt: float) -> np.ndarray:
+        _check_dt(dt)
+        A, Qc = self._continuous()
+        _, Q1 = van_loan(A, Qc, dt)
+        return np.kron(Q1, np.eye(self.spatial_dims))
+
+
+def van_loan(A: np.ndarray, Qc: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact discretisation of ``dx = A x dt + dW``, ``E[dW dW^T] = Qc dt`` (Van Loan, 1978).
+
+    ``expm([[-A, Qc], [0, A^T]] dt) = [[., F^-1 Q], [0, F^T]]``, hence ``F`` and ``Q``."""
+    n = A.shape[0]
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n] = -A
+    M[:n, n:] = Qc
+    M[n:, n:] = A.T
+    E = scipy.linalg.expm(M * dt)
+    F = E[n:, n:].T
+    Q = F @ E[:n, n:]
+    return F, 0.5 * (Q + Q.T)
+
+
+def _check_positive(value: int, name: str) -> None:
+    if int(value) != value or value < 1:
+        raise ValueError(f"{name} must be a positive integer, got {value}")
+
+
+def _check_dt(dt: float) -> None:
+    if not np.isfinite(dt) or dt < 0:
+        raise ValueError(f"time step must be finite and non-negative, got {dt}")

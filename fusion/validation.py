@@ -1,0 +1,76 @@
+"""Input checks shared by every belief type.
+
+Each check raises ``ValueError`` with a message that names the argument and the problem, so that a
+bad matrix coming off the wire or out of a config file is rejected before it touches a belief.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Relative tolerance for symmetry and for the smallest admissible eigenvalue of a PSD matrix.
+#: Chosen here: loose enough for matrices that went through a few float64 operations.
+SYMMETRY_RTOL = 1e-8
+PSD_RTOL = 1e-9
+
+
+def as_vector(value, name: str, size: int | None = None) -> np.ndarray:
+    """Return ``value`` as a finite float64 vector, optionally of a given size."""
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be a vector, got shape {arr.shape}")
+    if size is not None and arr.shape[0] != size:
+        raise ValueError(f"{name} must have length {size}, got {arr.shape[0]}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains non-finite values (NaN or inf)")
+    return arr
+
+
+def as_square(value, name: str, size: int | None = None) -> np.ndarray:
+    """Return ``value`` as a finite float64 square matrix, optionally of a given size."""
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim != 2 or arr.shape[0] != arr.shape[1]:
+        raise ValueError(f"{name} must be a square matrix, got shape {arr.shape}")
+    if size is not None and arr.shape[0] != size:
+        raise ValueError(f"{name} must be {size}x{size}, got {arr.shape[0]}x{arr.shape[1]}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains non-finite values (NaN or inf)")
+    return arr
+
+
+def as_symmetric(value, name: str, size: int | None = None) -> np.ndarray:
+    """A finite square matrix that is symmetric to ``SYMMETRY_RTOL``, returned exactly symmetrised."""
+    arr = as_square(value, name, size)
+    scale = max(1.0, float(np.max(np.abs(arr))) if arr.size else 1.0)
+    if not np.allclose(arr, arr.T, rtol=0.0, atol=SYMMETRY_RTOL * scale):
+        raise ValueError(f"{name} is not symmetric")
+    return 0.5 * (arr + arr.T)
+
+
+def as_psd(value, name: str, size: int | None = None) -> np.ndarray:
+    """A symmetric positive semi-definite matrix (zero is allowed: it means no information)."""
+    arr = as_symmetric(value, name, size)
+    if arr.size and min_eigenvalue(arr) < -PSD_RTOL * max(1.0, float(np.max(np.abs(arr)))):
+        raise ValueError(f"{name} is not positive semi-definite (it has a negative eigenvalue)")
+    return arr
+
+
+def as_pd(value, name: str, size: int | None = None) -> np.ndarray:
+    """A symmetric positive-definite matrix, e.g. a covariance or a noise matrix."""
+    arr = as_symmetric(value, name, size)
+    try:
+        np.linalg.cholesky(arr)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"{name} is not positive definite") from None
+    return arr
+
+
+def min_eigenvalue(matrix: np.ndarray) -> float:
+    """Smallest eigenvalue of a symmetric matrix."""
+    return float(np.linalg.eigvalsh(matrix)[0])
+
+
+def is_psd(matrix: np.ndarray) -> bool:
+    """True when a symmetric matrix is positive semi-definite to ``PSD_RTOL``."""
+    scale = max(1.0, float(np.max(np.abs(matrix)))) if matrix.size else 1.0
+    return matrix.size == 0 or min_eigenvalue(matrix) >= -PSD_RTOL * scale
