@@ -113,15 +113,26 @@ class Singer:
 def van_loan(A: np.ndarray, Qc: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact discretisation of ``dx = A x dt + dW``, ``E[dW dW^T] = Qc dt`` (Van Loan, 1978).
 
-    ``expm([[-A, Qc], [0, A^T]] dt) = [[., F^-1 Q], [0, F^T]]``, hence ``F`` and ``Q``."""
+    ``expm([[-A, Qc], [0, A^T]] dt) = [[., F^-1 Q], [0, F^T]]``, hence ``F`` and ``Q``.
+
+    The block exponential contains ``expm(-A dt)``, which grows like ``e^{alpha dt}`` for a decaying
+    mode (Singer), and ``Q = F (F^-1 Q)`` then cancels catastrophically (garbage, even an indefinite
+    ``Q``, from ``alpha dt ~ 20``). So the block formula is applied only over ``h = dt / 2^k`` with
+    ``||A|| h <= 1``, and the step is doubled ``k`` times: ``Q(2h) = F(h) Q(h) F(h)^T + Q(h)``,
+    ``F(2h) = F(h)^2`` (exact, and a sum of PSD terms)."""
     n = A.shape[0]
     M = np.zeros((2 * n, 2 * n))
     M[:n, :n] = -A
     M[:n, n:] = Qc
     M[n:, n:] = A.T
-    E = scipy.linalg.expm(M * dt)
+    span = float(np.linalg.norm(A, 1)) * abs(dt)
+    k = int(np.ceil(np.log2(span))) if span > 1.0 else 0
+    E = scipy.linalg.expm(M * (dt / 2**k))
     F = E[n:, n:].T
     Q = F @ E[:n, n:]
+    for _ in range(k):
+        Q = F @ Q @ F.T + Q
+        F = F @ F
     return F, 0.5 * (Q + Q.T)
 
 
