@@ -16,6 +16,10 @@ tree the common information splits into two disjoint parts,
 * ``A``, this node's side information that the neighbour holds — the node-side part of the
   acknowledged message, ``A = sent_a - B_a`` where ``sent_a`` and ``B_a`` are recorded at send time.
 
+Messages are broadcasts: :meth:`ChannelFilter.on_send` records the sent belief once, and each channel
+records its ``B`` at that moment. A neighbour first heard after message ``s`` held only the prior at
+``s``, so its acknowledgement of an earlier message is still usable.
+
 Receiving ``m`` with acknowledgement ``a``: ``fused = local + m - (B + A)`` and ``B <- m - A``. A lost
 message in either direction leaves both parts valid, so loss can never make the result overconfident.
 
@@ -56,7 +60,8 @@ class Received:
 @dataclass
 class _Channel:
     inbound: object  # B: neighbour-side information held here (includes the common prior)
-    sent: OrderedDict = field(default_factory=OrderedDict)  # seq -> (local at send, B at send)
+    opened_after: int | None  # the last seq sent before this channel existed (B was the prior then)
+    inbound_at_send: OrderedDict = field(default_factory=OrderedDict)  # seq -> B when seq was sent
     synchronized: bool = True
     last_seq: int | None = None
 
@@ -76,12 +81,14 @@ class ChannelFilter:
         history: int = 64,
     ):
         self.prior = prior
+        self._latest_prior = prior  # the prior advanced to the newest epoch seen, so advancing stays O(1)
         self.policy = Policy(policy)
         self.intersect = intersect or _intersect_det
         if history < 1:
             raise ValueError(f"history must hold at least one message, got {history}")
         self.history = history
         self._channels: dict[Hashable, _Channel] = {}
+        self._sent: OrderedDict = OrderedDict()  # seq -> the local belief broadcast as that message
 
     # -- bookkeeping ------------------------------------------------------------------------------
     def neighbours(self) -> list:
@@ -95,7 +102,9 @@ class ChannelFilter:
 
         Correct when the neighbour is known to hold nothing of ours (a new neighbour, or one that
         restarted); after a loop or an unknown exchange the channel must stay desynchronised instead."""
-        self._channels[neighbour] = _Channel(inbound=self.prior)
+        self._channels[neighbour] = _Channel(
+            inbound=self._latest_prior, opened_after=next(reversed(self._sent), None)
+        )
 
     def desynchronize(self, neighbour) -> None:
         """Mark the common information with ``neighbour`` as unknown: fuse by intersection from now on."""
@@ -107,14 +116,38 @@ class ChannelFilter:
         return self._channels[neighbour]
 
     # -- the protocol -----------------------------------------------------------------------------
-    def on_send(self, neighbour, local, seq: int) -> None:
-        """Record what is sent to ``neighbour`` as message ``seq`` (Merino (3.38), deferred to the ack)."""
-        ch = self._channel(neighbour)
+    def on_send(self, local, seq: int) -> None:
+        """Record the belief broadcast as message ``seq`` (Merino (3.38), deferred to the acknowledgement)."""
         if self.policy in (Policy.CI, Policy.NAIVE):
             return
-        ch.sent[seq] = (local, ch.inbound)
-        while len(ch.sent) > self.history:
-            ch.sent.popitem(last=False)
+        if self._sent and seq <= next(reversed(self._sent)):
+            raise ValueError(f"sequence numbers must increase: {seq} after {next(reversed(self._sent))}")
+        self._sent[seq] = local
+        if len(self._sent) > self.history:
+            self._sent.popitem(last=False)
+        for ch in self._channels.values():
+            ch.inbound_at_send[seq] = ch.inbound
+            if len(ch.inbound_at_send) > self.history:
+                ch.inbound_at_send.popitem(last=False)
+
+    def _sent_entry(self, ch: _Channel, seq: int):
+        """(local, B) as they were when message ``seq`` was sent, or ``None`` if no longer known."""
+        if seq not in self._sent:
+            return None
+        if seq in ch.inbound_at_send:
+            return self._sent[seq], ch.inbound_at_send[seq]
+        if ch.opened_after is not None and seq <= ch.opened_after:
+            return self._sent[seq], self._latest_prior
+        return None
+
+    def _prior_at(self, epoch):
+        """The common prior at ``epoch`` (advanced incrementally: a trajectory prior is the same chain
+        at every epoch, and advancing it from its creation on every receive would cost its age)."""
+        if epoch is not None and epoch > self._latest_prior.epoch:
+            self._latest_prior = self._latest_prior.advanced_to(epoch)
+        if epoch is None or epoch == self._latest_prior.epoch:
+            return self._latest_prior
+        return self.prior.advanced_to(epoch)  # an older epoch than seen before: rare, so the slow path
 
     def on_receive(
         self,
@@ -138,9 +171,10 @@ class ChannelFilter:
             ch.last_seq = seq
         epoch = _newest_epoch(local, received)
         local, received = local.advanced_to(epoch), received.advanced_to(epoch)
+        self._prior_at(epoch)
 
         if self.policy is Policy.NAIVE:
-            return Received(local.fuse(received).remove(self.prior.advanced_to(epoch)), "naive")
+            return Received(local.fuse(received).remove(self._prior_at(epoch)), "naive")
         if self.policy is Policy.CI:
             return Received(self.intersect(local, received), "ci")
         if self.policy is Policy.HYBRID and not tree_edge:
@@ -152,11 +186,11 @@ class ChannelFilter:
 
     def _exact(self, ch: _Channel, local, received, acked_seq, epoch) -> Received:
         inbound = ch.inbound.advanced_to(epoch)
+        entry = None if acked_seq is None else self._sent_entry(ch, acked_seq)
         if acked_seq is None:
             ours_there = None
-        elif acked_seq in ch.sent:
-            sent_local, sent_inbound = ch.sent[acked_seq]
-            ours_there = (sent_local.advanced_to(epoch), sent_inbound.advanced_to(epoch))
+        elif entry is not None:
+            ours_there = (entry[0].advanced_to(epoch), entry[1].advanced_to(epoch))
         else:
             ch.synchronized = False
             return Received(

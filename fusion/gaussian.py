@@ -125,7 +125,9 @@ class Gaussian:
         With ``Psi = F^-T Y F^-1`` (3.11), Merino's (3.12) ``Psi - Psi (Q^-1 + Psi)^-1 Psi`` equals
         ``(I + Psi Q)^-1 Psi``, and (3.13) equals ``(I + Psi Q)^-1 F^-T y``. This form needs neither
         ``Q`` nor ``Y`` to be invertible, so zero information and a static model (``Q = 0``) work."""
-        F_inv = np.linalg.inv(F) if F_inv is None else F_inv
+        F = validation.finite_square(F, "transition matrix F", self.dim)
+        Q = validation.finite_square(Q, "process noise Q", self.dim)
+        F_inv = np.linalg.inv(F) if F_inv is None else validation.finite_square(F_inv, "inverse transition", self.dim)
         psi = F_inv.T @ self.Y @ F_inv
         gain = np.eye(self.dim) + psi @ Q
         rhs = np.concatenate([psi, (F_inv.T @ self.y)[:, None]], axis=1)
@@ -135,6 +137,7 @@ class Gaussian:
 
     def update(self, H: np.ndarray, R_inv: np.ndarray, z: np.ndarray) -> Gaussian:
         """Linear measurement update ``Y + H^T R^-1 H``, ``y + H^T R^-1 z`` (Merino (3.17)-(3.18))."""
+        H, R_inv, z = validation.measurement_terms(H, R_inv, z, self.dim)
         HtRi = H.T @ R_inv
         return Gaussian(self.y + HtRi @ z, self.Y + HtRi @ H)
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fusion import validation
 from fusion.gaussian import Gaussian
 
 
@@ -20,7 +21,7 @@ def predict(belief: Gaussian, model, dt: float) -> Gaussian:
 
 def update(belief: Gaussian, model, z) -> Gaussian:
     """Linear update (Merino (3.17)-(3.18)); ``model`` must be linear (it has a constant ``H``)."""
-    return belief.update(model.jacobian(), model.R_inv, np.asarray(z, dtype=float))
+    return belief.update(model.jacobian(), model.R_inv, z)
 
 
 def eif_update(belief: Gaussian, model, z, linearization_point=None) -> Gaussian:
@@ -28,6 +29,7 @@ def eif_update(belief: Gaussian, model, z, linearization_point=None) -> Gaussian
 
     ``linearization_point`` defaults to the belief's mean; pass it explicitly when the belief is not
     yet fully observable (e.g. a bearing-only track initialised from a prior along a ray)."""
+    z = validation.as_vector(np.atleast_1d(np.asarray(z, dtype=float)), "measurement z", model.dim)
     mu = belief.mean if linearization_point is None else np.asarray(linearization_point, dtype=float)
     H = model.jacobian(mu)
     innovation = model.residual(z, model.h(mu))

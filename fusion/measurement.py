@@ -61,7 +61,10 @@ class Bearing2D(_Model):
     dim = 1
 
     def __init__(self, state_dim: int, sensor, sigma: float, spatial_dims: int = 2):
-        self.sensor = validation.as_vector(sensor, "sensor position")[:2]
+        sensor = validation.as_vector(sensor, "sensor position")
+        if sensor.shape[0] not in (2, 3):
+            raise ValueError(f"sensor position must have length 2 or 3 (altitude ignored), got {sensor.shape[0]}")
+        self.sensor = sensor[:2]
         super().__init__(state_dim, spatial_dims, np.array([[sigma**2]]))
 
     def _delta(self, x):

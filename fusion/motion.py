@@ -22,16 +22,21 @@ import scipy.linalg
 class ConstantVelocity:
     """White-noise acceleration with power spectral density ``q`` [m^2/s^3] per axis.
 
-    ``F = [[I, dt I], [0, I]]`` (3.58) and ``Q = q [[dt^3/3 I, dt^2/2 I], [dt^2/2 I, dt I]]`` (3.59).
+    ``F = [[I, dt I], [0, I]]`` (3.58) and ``Q = [[dt^3/3 D, dt^2/2 D], [dt^2/2 D, dt D]]`` (3.59) with
+    ``D = q I`` — or, when ``vertical_q`` is given, ``D = diag(q, ..., q, vertical_q)``: a ground target
+    accelerates freely on the ground but hardly up or down (the last axis is "down" in NED).
     """
 
     spatial_dims: int = 3
     q: float = 0.1  # chosen here: a walking-pace target (about 0.3 m/s of velocity change per sqrt(s))
+    vertical_q: float | None = None
 
     def __post_init__(self):
         _check_positive(self.spatial_dims, "spatial_dims")
-        if not np.isfinite(self.q) or self.q < 0:
-            raise ValueError(f"q must be a finite non-negative spectral density, got {self.q}")
+        for name in ("q", "vertical_q"):
+            value = getattr(self, name)
+            if value is not None and (not np.isfinite(value) or value < 0):
+                raise ValueError(f"{name} must be a finite non-negative spectral density, got {value}")
 
     @property
     def dim(self) -> int:
@@ -46,7 +51,10 @@ class ConstantVelocity:
     def noise(self, dt: float) -> np.ndarray:
         _check_dt(dt)
         block = np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
-        return self.q * np.kron(block, np.eye(self.spatial_dims))
+        density = np.full(self.spatial_dims, float(self.q))
+        if self.vertical_q is not None:
+            density[-1] = self.vertical_q
+        return np.kron(block, np.diag(density))
 
 
 @dataclass(frozen=True)

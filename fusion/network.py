@@ -88,8 +88,8 @@ class FilterNetwork:
         outbox = []
         for i in range(self.n):
             self._seq[i] += 1
+            self.filters[i].on_send(self.beliefs[i], self._seq[i])
             for j in self.neighbours(i):
-                self.filters[i].on_send(j, self.beliefs[i], self._seq[i])
                 outbox.append((j, i, self.beliefs[i], self._seq[i], self._last_received[i].get(j)))
         for receiver, sender, belief, seq, ack in sorted(outbox, key=lambda m: (m[0], m[1])):
             if self.loss and self.rng.random() < self.loss:

@@ -114,26 +114,46 @@ class Trajectory:
     def update(self, H: np.ndarray, R_inv: np.ndarray, z, offset: int = 0) -> Trajectory:
         """Linear update of the state ``offset`` steps before the newest (Merino (3.29)-(3.30))."""
         block = self._block(offset)
+        H, R_inv, z = validation.measurement_terms(H, R_inv, z, self.model.state_dim)
         HtRi = H.T @ R_inv
         y, Y = self.y.copy(), self.Y.copy()
-        y[block] += HtRi @ np.asarray(z, dtype=float)
+        y[block] += HtRi @ z
         Y[block, block] += HtRi @ H
         return Trajectory(y, Y, self.epoch, self.model)
 
     def eif_update(self, model, z, offset: int = 0, linearization_point=None) -> Trajectory:
         """Extended information update of one state of the window (Merino (3.52))."""
+        z = validation.as_vector(np.atleast_1d(np.asarray(z, dtype=float)), "measurement z", model.dim)
         mu = self.state(offset).mean if linearization_point is None else np.asarray(linearization_point, float)
         H = model.jacobian(mu)
         return self.update(H, model.R_inv, model.residual(z, model.h(mu)) + H @ mu, offset)
 
     def state(self, offset: int = 0) -> Gaussian:
         """The marginal belief on one state of the window (Merino App. A); ``offset=0`` is the newest."""
+        if offset == 0:
+            return self.current()
         block = self._block(offset)
         return Gaussian(self.y, self.Y).marginal(range(block.start, block.stop))
 
     def current(self) -> Gaussian:
-        """The marginal belief on the newest state."""
-        return self.state(0)
+        """The marginal belief on the newest state, by forward elimination of the older states.
+
+        The information matrix is block-tridiagonal (the process factors couple consecutive states
+        only, updates touch one block, and marginalising the oldest state keeps the structure), so
+        eliminating states oldest first applies Merino (3.31)-(3.32) once per state:
+        ``Y_kk <- Y_kk - Y_k,k-1 Y_k-1^-1 Y_k-1,k`` with ``n x n`` blocks only — O(L n^3), not O((L n)^3)."""
+        n, L = self.model.state_dim, self.model.window
+        Y_prev, y_prev = self.Y[:n, :n], self.y[:n]
+        for k in range(1, L):
+            cur = slice(k * n, (k + 1) * n)
+            coupling = self.Y[cur, (k - 1) * n : k * n]
+            try:
+                sol = np.linalg.solve(Y_prev, np.concatenate([coupling.T, y_prev[:, None]], axis=1))
+            except np.linalg.LinAlgError:
+                raise UninformativeBeliefError(f"state {k - 1} of the window carries singular information") from None
+            Y_prev = self.Y[cur, cur] - coupling @ sol[:, :-1]
+            y_prev = self.y[cur] - coupling @ sol[:, -1]
+        return Gaussian(y_prev, 0.5 * (Y_prev + Y_prev.T))
 
     def _block(self, offset: int) -> slice:
         L, n = self.model.window, self.model.state_dim
@@ -196,3 +216,14 @@ def _slide(y: np.ndarray, Y: np.ndarray, n: int, factor: np.ndarray) -> tuple[np
         raise UninformativeBeliefError("cannot marginalise the oldest state: its information is singular") from None
     Yr = big[n:, n:] - Y0r.T @ sol[:, :-1]
     return y_big[n:] - Y0r.T @ sol[:, -1], 0.5 * (Yr + Yr.T)
+
+
+def intersect_on_newest(a: Trajectory, b: Trajectory, objective: str = "det") -> Trajectory:
+    """Covariance intersection of two trajectories, with ``omega`` optimised on their newest-state
+    marginals (``n x n``) rather than on the whole window (``Ln x Ln``). Any ``omega`` in [0, 1] gives
+    a consistent result (Merino (3.43)-(3.44)); this choice makes the *current* estimate as tight as
+    the rule allows, at a fraction of the cost."""
+    from fusion.covariance_intersection import optimal_weights
+
+    omega = optimal_weights([a.current().Y, b.current().Y], objective)[0]
+    return a.intersect(b, float(omega))

@@ -26,6 +26,8 @@ def sigma_points(mean, cov, kappa: float | None = None) -> tuple[np.ndarray, np.
     n = mean.shape[0]
     cov = validation.as_psd(cov, "covariance", n)
     kappa = default_kappa(n) if kappa is None else float(kappa)
+    if not np.isfinite(kappa):
+        raise ValueError(f"kappa must be finite, got {kappa}")
     if kappa + n <= 0:
         raise ValueError(f"kappa + n must be positive, got kappa={kappa}, n={n}")
     try:

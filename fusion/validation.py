@@ -65,6 +65,33 @@ def as_pd(value, name: str, size: int | None = None) -> np.ndarray:
     return arr
 
 
+def measurement_terms(H, R_inv, z, state_dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cheap checks for the hot path of a linear(ised) update: shapes, and a finite ``H`` and ``z``.
+
+    ``R^-1`` is only shape-checked: its symmetry and definiteness are checked once, where the
+    measurement model is built (``as_pd`` on ``R``), not at every update."""
+    H = np.asarray(H, dtype=float)
+    if H.ndim != 2 or H.shape[1] != state_dim:
+        raise ValueError(f"measurement matrix H must be m x {state_dim}, got shape {H.shape}")
+    if not np.isfinite(H).all():
+        raise ValueError("measurement matrix H contains non-finite values (NaN or inf)")
+    R_inv = np.asarray(R_inv, dtype=float)
+    if R_inv.shape != (H.shape[0], H.shape[0]):
+        raise ValueError(f"inverse measurement noise R^-1 must be {H.shape[0]}x{H.shape[0]}, got shape {R_inv.shape}")
+    z = as_vector(np.atleast_1d(z), "measurement z", H.shape[0])
+    return H, R_inv, z
+
+
+def finite_square(value, name: str, size: int) -> np.ndarray:
+    """A finite ``size x size`` matrix (shape and finiteness only: cheap enough for every prediction)."""
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (size, size):
+        raise ValueError(f"{name} must be {size}x{size}, got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} contains non-finite values (NaN or inf)")
+    return arr
+
+
 def min_eigenvalue(matrix: np.ndarray) -> float:
     """Smallest eigenvalue of a symmetric matrix."""
     return float(np.linalg.eigvalsh(matrix)[0])

@@ -1,0 +1,122 @@
+"""The agent's view of a scenario file (TOML): timing, area, vehicle, sensor, tracking, tasking.
+
+The world's sections (``targets``, later ``radio``) belong to ``mesh_sim.scenario``; the agent reads
+only what it needs and rejects what it does not know, so a typo in a scenario is an error, not a
+silently ignored setting.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agent.sensing import BearingSensorConfig
+from agent.tracking import TrackerConfig
+
+#: Top-level keys that the world reads; the agent accepts and ignores them.
+WORLD_KEYS = frozenset({"targets", "radio", "description"})
+AGENT_KEYS = frozenset(
+    {"name", "duration", "agents", "rate_hz", "send_period", "altitude", "area", "origin", "terrain", "vehicle",
+     "sensor", "tracking", "tasking", "seed"}
+)
+
+
+@dataclass(frozen=True)
+class Area:
+    north: tuple[float, float]
+    east: tuple[float, float]
+
+    def __post_init__(self):
+        for name in ("north", "east"):
+            lo, hi = getattr(self, name)
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+                raise ValueError(f"area.{name} must be [min, max] with min < max, got {[lo, hi]}")
+
+    def as_tuple(self) -> tuple[float, float, float, float]:
+        return (*self.north, *self.east)
+
+
+@dataclass(frozen=True)
+class AgentScenario:
+    name: str = "default"
+    duration: float = 60.0
+    agents: int = 4
+    rate_hz: float = 5.0  # DESIGN.md §4 default agent rate
+    send_period: float = 1.0  # seconds between belief broadcasts; chosen here
+    altitude: float = 80.0  # flight height above the origin [m]; chosen here
+    seed: int = 1
+    area: Area = field(default_factory=lambda: Area((-150.0, 150.0), (-150.0, 150.0)))
+    origin: tuple[float, float, float] = (43.5605, 1.4664, 150.0)  # lat, lon [deg], alt [m]; chosen here
+    terrain: dict = field(default_factory=lambda: {"kind": "flat"})
+    vehicle: dict = field(default_factory=lambda: {"kind": "multirotor"})
+    sensor: BearingSensorConfig = field(default_factory=BearingSensorConfig)
+    tracking: TrackerConfig = field(default_factory=TrackerConfig)
+    tasking: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name in ("duration", "rate_hz", "send_period", "altitude"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value!r}")
+        if int(self.agents) != self.agents or self.agents < 1:
+            raise ValueError(f"agents must be a positive integer, got {self.agents!r}")
+
+    @property
+    def step(self) -> float:
+        return 1.0 / self.rate_hz
+
+    def start_position(self, index: int) -> np.ndarray:
+        """Agents start spread along the southern edge of the area, at flight altitude."""
+        (n0, _), (e0, e1) = self.area.north, self.area.east
+        east = e0 + (index + 0.5) * (e1 - e0) / self.agents
+        return np.array([n0, east, -self.altitude])
+
+    @classmethod
+    def from_dict(cls, d: dict) -> AgentScenario:
+        unknown = set(d) - AGENT_KEYS - WORLD_KEYS
+        if unknown:
+            raise ValueError(f"unknown scenario settings: {sorted(unknown)}")
+        kwargs = {k: d[k] for k in ("name", "duration", "agents", "rate_hz", "send_period", "altitude", "seed")
+                  if k in d}
+        for number in ("duration", "rate_hz", "send_period", "altitude"):
+            if number in kwargs:
+                kwargs[number] = _number(kwargs[number], number)
+        if "area" in d:
+            kwargs["area"] = Area(tuple(map(float, d["area"]["north"])), tuple(map(float, d["area"]["east"])))
+        if "origin" in d:
+            o = d["origin"]
+            kwargs["origin"] = (float(o["lat"]), float(o["lon"]), float(o.get("alt", 0.0)))
+        for section in ("terrain", "vehicle", "tasking"):
+            if section in d:
+                kwargs[section] = dict(d[section])
+        if "sensor" in d:
+            kwargs["sensor"] = BearingSensorConfig.from_dict(d["sensor"])
+        if "tracking" in d:
+            kwargs["tracking"] = _dataclass_from_dict(TrackerConfig, d["tracking"], "tracking")
+        return cls(**kwargs)
+
+
+def load_toml(path: str | Path) -> dict:
+    """Read a scenario file, turning a syntax error into a ValueError that names the file."""
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as err:
+        raise ValueError(f"{path}: not valid TOML: {err}") from None
+
+
+def _number(value, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    return float(value)
+
+
+def _dataclass_from_dict(cls, d: dict, section: str):
+    names = set(cls.__dataclass_fields__)
+    unknown = set(d) - names
+    if unknown:
+        raise ValueError(f"unknown {section} settings: {sorted(unknown)}")
+    return cls(**d)

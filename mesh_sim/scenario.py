@@ -1,0 +1,60 @@
+"""A whole scenario: the agents' part (``agent.config``) plus the world's targets.
+
+Scenarios are TOML files; the ones shipped with skymesh live in ``mesh_sim/scenarios`` and are named
+by their stem (``skymesh run --scenario default``); any other path is read as a file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from agent.config import AgentScenario, load_toml
+from mesh_sim.targets import targets_from_config
+from perception.terrain import terrain_from_config
+
+SCENARIO_DIR = Path(__file__).with_name("scenarios")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    path: Path
+    raw: dict
+    agent: AgentScenario
+    targets: list
+
+    @property
+    def name(self) -> str:
+        return self.agent.name
+
+
+def shipped() -> list[str]:
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+
+
+def resolve(name_or_path: str) -> Path:
+    """A shipped scenario by name, or a TOML file by path."""
+    candidate = SCENARIO_DIR / f"{name_or_path}.toml"
+    if candidate.is_file():
+        return candidate
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    raise ValueError(f"no scenario {name_or_path!r}: not a file, and not one of {shipped()}")
+
+
+def load(name_or_path: str, **overrides) -> Scenario:
+    """Load and validate a scenario; ``overrides`` replace top-level agent settings (e.g. agents=8)."""
+    path = resolve(name_or_path)
+    raw = load_toml(path)
+    raw.update({k: v for k, v in overrides.items() if v is not None})
+    try:
+        agent = AgentScenario.from_dict(raw)
+        targets = targets_from_config(raw.get("targets", []), terrain_from_config(agent.terrain))
+    except (ValueError, TypeError, KeyError) as err:
+        raise ValueError(f"{path}: {err}") from None
+    return Scenario(path, raw, agent, targets)
+
+
+def with_agents(scenario: Scenario, agents: int) -> Scenario:
+    return replace(scenario, agent=replace(scenario.agent, agents=agents), raw={**scenario.raw, "agents": agents})

@@ -1,0 +1,409 @@
+"""Ground-target truth models (spec 004 §4).
+
+Every target is a frozen dataclass whose ``state(t)`` is a deterministic function of the simulation
+time ``t`` [s], so any process can evaluate truth at any time. Targets move on the ground: the
+model gives the horizontal track ``(n(t), e(t))`` and the terrain gives the height, so that in NED
+(z down)
+
+    ``z(t) = -h(n(t), e(t))``,   ``ż(t) = -(∂h/∂n ṅ + ∂h/∂e ė)``   (chain rule).
+
+* :class:`StaticTarget` — spec 004 §4.3.
+* :class:`ConstantVelocityTarget` — ``p(t) = p0 + v t``, spec 004 §4.2.
+* :class:`Figure8Target` — ``p(t) = c + R(ψ) d [sin(4πωt), sin(2πωt)]``, spec 004 §4.1 (Eqs. 14-15,
+  closed form; the peak speed is ``2πωd √5 ≈ 8.0`` m/s for ``d = 20`` m, ``ω = 0.0285`` Hz).
+* :class:`SingerTarget` — "man-like" manoeuvring target, spec 004 §4.4 (Eqs. 16-17, Singer-type).
+
+:func:`targets_from_config` builds them from TOML-like tables; :func:`truth_snapshot` turns them
+into plain data for the wire.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from numbers import Integral, Real
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from perception.terrain import FlatTerrain, Terrain, terrain_gradient
+
+__all__ = [
+    "Target",
+    "StaticTarget",
+    "ConstantVelocityTarget",
+    "Figure8Target",
+    "SingerTarget",
+    "targets_from_config",
+    "truth_snapshot",
+]
+
+_FLAT = FlatTerrain()
+
+
+@runtime_checkable
+class Target(Protocol):
+    id: str
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(position_ned (3,), velocity_ned (3,))`` at time ``t``."""
+        ...
+
+
+# --------------------------------------------------------------------------------------- helpers
+
+
+def _check_time(t: float) -> float:
+    if isinstance(t, bool) or not isinstance(t, Real) or not math.isfinite(t):
+        raise ValueError(f"time must be a finite number, got {t!r}")
+    return float(t)
+
+
+def _vec2(value: Any, name: str) -> tuple[float, float]:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (2,):
+        raise ValueError(f"{name} must have 2 entries (north, east), got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+    return float(arr[0]), float(arr[1])
+
+
+def _real(
+    value: Any, name: str, *, positive: bool = False, non_negative: bool = False, allow_inf: bool = False
+) -> float:
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    value = float(value)
+    if math.isnan(value) or (math.isinf(value) and not (allow_inf and value > 0)):
+        raise ValueError(f"{name} must be finite, got {value}")
+    if positive and not value > 0:
+        raise ValueError(f"{name} must be > 0, got {value}")
+    if non_negative and not value >= 0:
+        raise ValueError(f"{name} must be >= 0, got {value}")
+    return value
+
+
+def _check_common(target: Any) -> None:
+    if not isinstance(target.id, str) or not target.id:
+        raise ValueError(f"target id must be a non-empty string, got {target.id!r}")
+    if not callable(getattr(target.terrain, "height", None)):
+        raise ValueError(f"target {target.id!r}: terrain must have a height(north, east) method")
+
+
+def _on_terrain(terrain: Terrain, n: float, e: float, vn: float, ve: float) -> tuple[np.ndarray, np.ndarray]:
+    """Lift a ground track point to NED: ``z = -h(n, e)``, ``ż = -∇h · (ṅ, ė)``."""
+    h = float(terrain.height(n, e))
+    gn, ge = terrain_gradient(terrain, n, e)
+    vz = -(float(gn) * vn + float(ge) * ve)
+    return np.array([n, e, 0.0 - h]), np.array([vn, ve, vz + 0.0])  # + 0.0: no -0.0 on the wire
+
+
+# ---------------------------------------------------------------------------------------- models
+
+
+@dataclass(frozen=True)
+class StaticTarget:
+    """A target fixed at ground position ``(n, e)`` (spec 004 §4.3)."""
+
+    position: tuple[float, float]
+    id: str = field(default="static", kw_only=True)
+    terrain: Terrain = field(default=_FLAT, kw_only=True)
+
+    def __post_init__(self):
+        object.__setattr__(self, "position", _vec2(self.position, "position"))
+        _check_common(self)
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        _check_time(t)
+        return _on_terrain(self.terrain, *self.position, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class ConstantVelocityTarget:
+    """``(n, e)(t) = position + velocity t`` with a 2-D ground velocity (spec 004 §4.2)."""
+
+    position: tuple[float, float]
+    velocity: tuple[float, float]
+    id: str = field(default="cv", kw_only=True)
+    terrain: Terrain = field(default=_FLAT, kw_only=True)
+
+    def __post_init__(self):
+        object.__setattr__(self, "position", _vec2(self.position, "position"))
+        object.__setattr__(self, "velocity", _vec2(self.velocity, "velocity"))
+        _check_common(self)
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        t = _check_time(t)
+        (n0, e0), (vn, ve) = self.position, self.velocity
+        return _on_terrain(self.terrain, n0 + vn * t, e0 + ve * t, vn, ve)
+
+
+@dataclass(frozen=True)
+class Figure8Target:
+    """Closed-form figure-8 (a 2:1 Lissajous), spec 004 §4.1 (Andreetto et al. Eqs. 14-15, with the
+    minus sign and the initial velocity that make the ODE an exact figure-8):
+
+        ``q(t) = d [sin(4πωt), sin(2πωt)]``,  ``q̇(t) = 2πωd [2 cos(4πωt), cos(2πωt)]``,
+        ``(n, e)(t) = center + R(heading) q(t)``,  ``R(ψ) = [[cos ψ, -sin ψ], [sin ψ, cos ψ]]``.
+
+    It passes through ``center`` at ``t = 0`` and ``t = 1/(2ω)``, repeats with period ``1/ω`` and its
+    peak ground speed is ``2πωd √5`` (at ``t = 0``), 8.0 m/s for the defaults. ``heading`` [rad] turns
+    the long (first) axis of the figure from north towards east."""
+
+    center: tuple[float, float]
+    d: float = 20.0
+    omega: float = 0.0285
+    heading: float = 0.0
+    id: str = field(default="figure8", kw_only=True)
+    terrain: Terrain = field(default=_FLAT, kw_only=True)
+
+    def __post_init__(self):
+        object.__setattr__(self, "center", _vec2(self.center, "center"))
+        object.__setattr__(self, "d", _real(self.d, "d", positive=True))
+        object.__setattr__(self, "omega", _real(self.omega, "omega", positive=True))
+        object.__setattr__(self, "heading", _real(self.heading, "heading"))
+        _check_common(self)
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.omega
+
+    @property
+    def peak_speed(self) -> float:
+        return 2.0 * math.pi * self.omega * self.d * math.sqrt(5.0)
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        t = _check_time(t)
+        w = 2.0 * math.pi * self.omega
+        qx, qy = self.d * math.sin(2.0 * w * t), self.d * math.sin(w * t)
+        vx, vy = 2.0 * w * self.d * math.cos(2.0 * w * t), w * self.d * math.cos(w * t)
+        c, s = math.cos(self.heading), math.sin(self.heading)
+        n = self.center[0] + c * qx - s * qy
+        e = self.center[1] + s * qx + c * qy
+        return _on_terrain(self.terrain, n, e, c * vx - s * vy, s * vx + c * vy)
+
+
+@dataclass(frozen=True)
+class SingerTarget:
+    """A "man-like" manoeuvring target (spec 004 §4.4, Singer-type): per ground axis
+
+        ``ȧ = -α a + w``,  stationary ``std(a) = sigma`` [m/s²]  (``E[w w'] = 2 α sigma² δ``),
+
+    sampled exactly on the grid ``t_k = k dt`` (Ornstein-Uhlenbeck transition):
+
+        ``a_{k+1} = φ a_k + sigma √(1 - φ²) ξ_k``,  ``φ = exp(-α dt)``,  ``ξ_k ~ N(0, I₂)``.
+
+    The velocity integrates the step-mean acceleration, ``v_{k+1} = v_k + dt (a_k + a_{k+1}) / 2``,
+    and is then clipped to ``|v_{k+1}| <= max_speed`` (ground speed, 8 m/s by default: the top of
+    the 0-8 m/s target range of spec 004); positions follow ``p_{k+1} = p_k + dt (v_k + v_{k+1}) / 2``.
+    Between grid points the velocity is linear and the position quadratic, so ``state(t)`` is
+    continuous and its velocity is exactly the derivative of its position.
+
+    The grid is pre-simulated in chunks of ``CHUNK_SECONDS``; chunk ``j`` draws its noise from
+    ``default_rng([seed, j])``. Chunks are produced lazily as ``t`` grows, and the result never
+    depends on the order of the queries, so ``state(t)`` is a pure function of ``(parameters, t)``.
+    ``t`` must lie in ``[0, max_horizon]``. Not safe for concurrent first evaluation from threads.
+
+    ``sigma`` is the RMS acceleration, not the spectral density of spec 004's ``w`` (whose σ = 0.1
+    m/s³ is ambiguous there): a white ``w`` of spectral density ``q`` gives ``sigma² = q / (2α)``.
+    ``acceleration`` is the initial acceleration ``a_0`` (spec 004: ``[1, 1]``; default 0, chosen here)."""
+
+    position: tuple[float, float]
+    velocity: tuple[float, float]
+    alpha: float
+    sigma: float
+    seed: int
+    dt: float = 0.05  # spec 004 §3: the 0.05 s tracking time step
+    max_speed: float = 8.0  # spec 004 §4.2: targets up to 8 m/s; math.inf disables the clip
+    acceleration: tuple[float, float] = (0.0, 0.0)
+    max_horizon: float = 86_400.0  # chosen here: a day of simulation time bounds the memory
+    id: str = field(default="singer", kw_only=True)
+    terrain: Terrain = field(default=_FLAT, kw_only=True)
+    _chunks: list = field(init=False, repr=False, compare=False, default_factory=list)
+
+    CHUNK_SECONDS = 60.0  # chosen here
+
+    def __post_init__(self):
+        object.__setattr__(self, "position", _vec2(self.position, "position"))
+        object.__setattr__(self, "velocity", _vec2(self.velocity, "velocity"))
+        object.__setattr__(self, "acceleration", _vec2(self.acceleration, "acceleration"))
+        object.__setattr__(self, "alpha", _real(self.alpha, "alpha", positive=True))
+        object.__setattr__(self, "sigma", _real(self.sigma, "sigma", non_negative=True))
+        object.__setattr__(self, "dt", _real(self.dt, "dt", positive=True))
+        object.__setattr__(self, "max_speed", _real(self.max_speed, "max_speed", positive=True, allow_inf=True))
+        object.__setattr__(self, "max_horizon", _real(self.max_horizon, "max_horizon", positive=True))
+        if isinstance(self.seed, bool) or not isinstance(self.seed, Integral) or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+        object.__setattr__(self, "seed", int(self.seed))
+        _check_common(self)
+        if math.hypot(*self.velocity) > self.max_speed:
+            raise ValueError(f"initial speed {math.hypot(*self.velocity):.3g} m/s exceeds max_speed {self.max_speed}")
+
+    # -- pre-simulation
+
+    @property
+    def _chunk_steps(self) -> int:
+        return max(1, round(self.CHUNK_SECONDS / self.dt))
+
+    def _simulate_chunk(self, j: int, p0, v0, a0) -> np.ndarray:
+        """Rows ``k = 0..K`` of ``(n, e, vn, ve, an, ae)`` from the chunk's start state."""
+        steps = self._chunk_steps
+        phi = math.exp(-self.alpha * self.dt)
+        gain = self.sigma * math.sqrt(-math.expm1(-2.0 * self.alpha * self.dt))
+        xi = np.random.default_rng([self.seed, j]).standard_normal((steps, 2)) * gain
+        out = np.empty((steps + 1, 6))
+        pn, pe = p0
+        vn, ve = v0
+        an, ae = a0
+        vmax, half = self.max_speed, 0.5 * self.dt
+        out[0] = (pn, pe, vn, ve, an, ae)
+        for k in range(steps):
+            an1 = phi * an + xi[k, 0]
+            ae1 = phi * ae + xi[k, 1]
+            vn1 = vn + half * (an + an1)
+            ve1 = ve + half * (ae + ae1)
+            speed = math.hypot(vn1, ve1)
+            if speed > vmax:
+                vn1 *= vmax / speed
+                ve1 *= vmax / speed
+            pn += half * (vn + vn1)
+            pe += half * (ve + ve1)
+            vn, ve, an, ae = vn1, ve1, an1, ae1
+            out[k + 1] = (pn, pe, vn, ve, an, ae)
+        out.setflags(write=False)
+        return out
+
+    def _ensure(self, t: float) -> None:
+        if t < 0.0 or t > self.max_horizon:
+            raise ValueError(f"target {self.id!r}: t = {t} is outside [0, max_horizon = {self.max_horizon}]")
+        steps = self._chunk_steps
+        need = int(t / self.dt) // steps
+        while len(self._chunks) <= need:
+            j = len(self._chunks)
+            if j == 0:
+                start = (self.position, self.velocity, self.acceleration)
+            else:
+                last = self._chunks[-1][-1]
+                start = ((last[0], last[1]), (last[2], last[3]), (last[4], last[5]))
+            self._chunks.append(self._simulate_chunk(j, *start))
+
+    def grid(self, t_end: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The pre-simulated ground grid up to ``t_end``: ``times (K+1,)``, ground positions, ground
+        velocities and the Singer accelerations ``a_k`` (each ``(K+1, 2)``)."""
+        t_end = _check_time(t_end)
+        self._ensure(t_end)
+        k_end = int(math.floor(t_end / self.dt + 1e-9))
+        rows = np.concatenate([self._chunks[0]] + [c[1:] for c in self._chunks[1:]])[: k_end + 1]
+        return np.arange(k_end + 1) * self.dt, rows[:, 0:2].copy(), rows[:, 2:4].copy(), rows[:, 4:6].copy()
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        t = _check_time(t)
+        self._ensure(t)
+        steps = self._chunk_steps
+        k = int(math.floor(t / self.dt))
+        j, i = divmod(k, steps)
+        rows = self._chunks[j]
+        s = t - (j * steps + i) * self.dt
+        (pn, pe, vn, ve), (vn1, ve1) = rows[i, :4], rows[i + 1, 2:4]
+        f = s / self.dt
+        vn_t = vn + (vn1 - vn) * f
+        ve_t = ve + (ve1 - ve) * f
+        n = pn + vn * s + 0.5 * (vn1 - vn) * s * f
+        e = pe + ve * s + 0.5 * (ve1 - ve) * s * f
+        return _on_terrain(self.terrain, float(n), float(e), float(vn_t), float(ve_t))
+
+
+# ---------------------------------------------------------------------------------------- config
+
+# kind -> (class, required fields, optional fields); each field maps to a parser below.
+_KINDS: dict[str, tuple[type, tuple[str, ...], tuple[str, ...]]] = {
+    "static": (StaticTarget, ("position",), ()),
+    "constant_velocity": (ConstantVelocityTarget, ("position", "velocity"), ()),
+    "figure8": (Figure8Target, ("center",), ("d", "omega", "heading_deg")),
+    "singer": (
+        SingerTarget,
+        ("position", "velocity", "alpha", "sigma", "seed"),
+        ("dt", "max_speed", "acceleration", "max_horizon"),
+    ),
+}
+_VECTORS = {"position", "velocity", "center", "acceleration"}
+_POSITIVE = {"d", "omega", "alpha", "dt", "max_speed", "max_horizon"}
+
+
+def _parse_field(name: str, value: Any) -> Any:
+    if name in _VECTORS:
+        if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+            raise ValueError(f"must be a list [north, east] of 2 numbers, got {value!r}")
+        if len(value) != 2:
+            raise ValueError(f"must have 2 entries [north, east], got {len(value)}")
+        return tuple(_real(v, f"entry {i}") for i, v in enumerate(value))
+    if name == "seed":
+        if isinstance(value, bool) or not isinstance(value, Integral) or value < 0:
+            raise ValueError(f"must be a non-negative integer, got {value!r}")
+        return int(value)
+    if name == "heading_deg":
+        return math.radians(_real(value, "value"))
+    return _real(value, "value", positive=name in _POSITIVE, non_negative=name == "sigma")
+
+
+def targets_from_config(configs: Sequence[Mapping[str, Any]], terrain: Terrain | None = None) -> list:
+    """Build targets from TOML-like tables, all riding on ``terrain`` (flat at 0 m if ``None``):
+
+    - ``{"id": "t0", "kind": "static", "position": [n, e]}``
+    - ``{"kind": "constant_velocity", "position": [n, e], "velocity": [vn, ve]}``
+    - ``{"kind": "figure8", "center": [n, e], "d": 20, "omega": 0.0285, "heading_deg": 0}``
+    - ``{"kind": "singer", "position": [n, e], "velocity": [vn, ve], "alpha": 0.1, "sigma": 0.5,
+      "seed": 3, "dt": 0.05, "max_speed": 8.0, "acceleration": [an, ae], "max_horizon": 86400}``
+
+    ``id`` defaults to ``"t<index>"`` and must be unique. Angles are degrees in the config and radians
+    inside. Unknown kinds or keys, missing keys, wrong lengths and non-finite or out-of-range numbers
+    raise :class:`ValueError` naming the target and the field."""
+    if isinstance(configs, Mapping) or isinstance(configs, (str, bytes)) or not isinstance(configs, Sequence):
+        raise ValueError(f"targets config must be a list of tables, got {type(configs).__name__}")
+    terrain = _FLAT if terrain is None else terrain
+    targets = []
+    seen: set[str] = set()
+    for index, config in enumerate(configs):
+        if not isinstance(config, Mapping):
+            raise ValueError(f"target #{index}: must be a table, got {type(config).__name__}")
+        tid = config.get("id", f"t{index}")
+        where = f"target #{index}" if not isinstance(tid, str) else f"target {tid!r} (#{index})"
+        if not isinstance(tid, str) or not tid:
+            raise ValueError(f"{where}: field 'id' must be a non-empty string, got {tid!r}")
+        if tid in seen:
+            raise ValueError(f"{where}: field 'id' duplicates an earlier target")
+        seen.add(tid)
+        kind = config.get("kind")
+        if kind not in _KINDS:
+            raise ValueError(f"{where}: field 'kind' must be one of {sorted(_KINDS)}, got {kind!r}")
+        cls, required, optional = _KINDS[kind]
+        for name in required:
+            if name not in config:
+                raise ValueError(f"{where}: missing field {name!r} (required for kind {kind!r})")
+        unknown = sorted(set(config) - {"id", "kind", *required, *optional})
+        if unknown:
+            raise ValueError(f"{where}: unknown field(s) {unknown} for kind {kind!r}")
+        kwargs = {}
+        for name in (*required, *optional):
+            if name in config:
+                try:
+                    kwargs[name] = _parse_field(name, config[name])
+                except ValueError as err:
+                    raise ValueError(f"{where}: field {name!r} {err}") from None
+        if "heading_deg" in kwargs:
+            kwargs["heading"] = kwargs.pop("heading_deg")
+        try:
+            targets.append(cls(**kwargs, id=tid, terrain=terrain))
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from None
+    return targets
+
+
+def truth_snapshot(targets: Sequence[Target], t: float) -> list[dict]:
+    """Plain data for the wire: ``[{"id", "position": [n, e, d], "velocity": [vn, ve, vd]}]`` at ``t``."""
+    out = []
+    for target in targets:
+        p, v = target.state(t)
+        out.append({"id": target.id, "position": [float(x) for x in p], "velocity": [float(x) for x in v]})
+    return out
