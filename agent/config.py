@@ -7,6 +7,7 @@ silently ignored setting.
 
 from __future__ import annotations
 
+import json
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -99,13 +100,22 @@ class AgentScenario:
         return cls(**kwargs)
 
 
-def load_toml(path: str | Path) -> dict:
-    """Read a scenario file, turning a syntax error into a ValueError that names the file."""
+def read_scenario_file(path: str | Path) -> dict:
+    """Read a scenario: TOML, or the JSON a launcher writes into its run folder. Errors name the file."""
+    path = Path(path)
     try:
-        with open(path, "rb") as f:
-            return tomllib.load(f)
-    except tomllib.TOMLDecodeError as err:
-        raise ValueError(f"{path}: not valid TOML: {err}") from None
+        if path.suffix == ".json":
+            raw = json.loads(path.read_text())
+        else:
+            with open(path, "rb") as f:
+                raw = tomllib.load(f)
+    except OSError as err:
+        raise ValueError(f"{path}: cannot read: {err.strerror}") from None
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as err:
+        raise ValueError(f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'}: {err}") from None
+    if not isinstance(raw, dict):
+        raise ValueError(f"{path}: a scenario must be a table of settings")
+    return raw
 
 
 def _number(value, name: str) -> float:

@@ -65,7 +65,9 @@ class TrackerConfig:
     policy: str = "hybrid"
 
     def __post_init__(self):
-        for name in ("gate", "track_gate", "max_position_std", "q", "vertical_q", "stale_after", "speed_std", "vertical_speed_std"):
+        positive = ("gate", "track_gate", "max_position_std", "q", "vertical_q", "stale_after", "speed_std",
+                    "vertical_speed_std")
+        for name in positive:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"tracking.{name} must be positive, got {value!r}")

@@ -37,7 +37,9 @@ _MIN_RHO2 = 1e-12
 class GaussianBatch:
     """``N`` Gaussian beliefs of dimension ``n`` in information form: ``y`` (N, n), ``Y`` (N, n, n).
 
-    Like :class:`~fusion.gaussian.Gaussian`, a batch is immutable: every operation returns a new batch."""
+    Like :class:`~fusion.gaussian.Gaussian`, a batch is immutable: every operation returns a new batch.
+    The constructor checks shapes only; every operation checks the shapes and finiteness of its inputs
+    and raises ``ValueError`` naming the offending argument."""
 
     __slots__ = ("y", "Y")
 
@@ -110,7 +112,9 @@ class GaussianBatch:
         Merino Alg. 3.2 in the form used by :meth:`fusion.gaussian.Gaussian.predict`:
         ``Psi = F^-T Y F^-1`` (3.11), ``Y' = (I + Psi Q)^-1 Psi`` (3.12), ``y' = (I + Psi Q)^-1 F^-T y``
         (3.13), solved for all tracks with one batched ``np.linalg.solve``. ``F``, ``Q`` and ``F_inv``
-        are (n, n) or (N, n, n); ``F_inv`` defaults to ``inv(F)``."""
+        are (n, n) or (N, n, n); ``F_inv`` defaults to ``inv(F)``. Like the per-track prediction, the
+        model matrices are checked for shape and finiteness only (``Q``'s definiteness is the model's
+        business, checked where the model is built)."""
         N, n = self.y.shape
         F = self._model_matrix(F, "transition matrix F", (n, n))
         Q = self._model_matrix(Q, "process noise Q", (n, n))
@@ -135,11 +139,13 @@ class GaussianBatch:
         H = np.asarray(H, dtype=float)
         if H.ndim not in (2, 3) or H.shape[-1] != n or (H.ndim == 3 and H.shape[0] != N):
             raise ValueError(f"measurement matrix H must have shape (m, {n}) or ({N}, m, {n}), got {H.shape}")
+        _check_finite(H, "measurement matrix H")
         m = H.shape[-2]
         R_inv = self._model_matrix(R_inv, "inverse measurement noise R_inv", (m, m))
         z = np.asarray(z, dtype=float)
         if z.shape != (N, m):
             raise ValueError(f"measurements z must have shape (N, m) = {(N, m)}, got {z.shape}")
+        _check_finite(z, "measurements z")
         HtRi = np.swapaxes(H, -1, -2) @ R_inv
         return GaussianBatch._trusted(self.y + (HtRi @ z[..., None])[..., 0], self.Y + HtRi @ H)
 
@@ -231,7 +237,7 @@ class GaussianBatch:
         N = len(self)
         if arr.shape != shape and arr.shape != (N, *shape):
             raise ValueError(f"{name} must have shape {shape} or {(N, *shape)}, got {arr.shape}")
-        return arr
+        return _check_finite(arr, name)
 
     def _linearization_points(self, points) -> np.ndarray:
         if points is None:
@@ -239,19 +245,25 @@ class GaussianBatch:
         points = np.asarray(points, dtype=float)
         if points.shape != self.y.shape:
             raise ValueError(f"linearization points must have shape (N, n) = {self.y.shape}, got {points.shape}")
-        return points
+        return _check_finite(points, "linearization points")
 
     def _sensors(self, sensors, k: int) -> np.ndarray:
         sensors = np.asarray(sensors, dtype=float)
         if sensors.shape != (k,) and sensors.shape != (len(self), k):
             raise ValueError(f"sensor positions must have shape ({k},) or ({len(self)}, {k}), got {sensors.shape}")
-        return sensors
+        return _check_finite(sensors, "sensor positions")
 
     def _measurements(self, z, m: int) -> np.ndarray:
         z = np.asarray(z, dtype=float)
         if z.shape != (len(self), m):
             raise ValueError(f"measurements z must have shape (N, {m}) = {(len(self), m)}, got {z.shape}")
-        return z
+        return _check_finite(z, "measurements z")
+
+
+def _check_finite(arr: np.ndarray, name: str) -> np.ndarray:
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} contains non-finite values (NaN or inf)")
+    return arr
 
 
 def _check_rho2(rho2: np.ndarray, message: str) -> None:

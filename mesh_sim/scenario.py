@@ -6,10 +6,10 @@ by their stem (``skymesh run --scenario default``); any other path is read as a 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
-from agent.config import AgentScenario, load_toml
+from agent.config import AgentScenario, read_scenario_file
 from mesh_sim.targets import targets_from_config
 from perception.terrain import terrain_from_config
 
@@ -35,6 +35,8 @@ def shipped() -> list[str]:
 def resolve(name_or_path: str) -> Path:
     """A shipped scenario by name, or a TOML file by path."""
     candidate = SCENARIO_DIR / f"{name_or_path}.toml"
+    if "/" in name_or_path or name_or_path.endswith((".toml", ".json")):
+        candidate = Path(name_or_path)
     if candidate.is_file():
         return candidate
     path = Path(name_or_path)
@@ -46,7 +48,7 @@ def resolve(name_or_path: str) -> Path:
 def load(name_or_path: str, **overrides) -> Scenario:
     """Load and validate a scenario; ``overrides`` replace top-level agent settings (e.g. agents=8)."""
     path = resolve(name_or_path)
-    raw = load_toml(path)
+    raw = read_scenario_file(path)
     raw.update({k: v for k, v in overrides.items() if v is not None})
     try:
         agent = AgentScenario.from_dict(raw)
@@ -55,6 +57,3 @@ def load(name_or_path: str, **overrides) -> Scenario:
         raise ValueError(f"{path}: {err}") from None
     return Scenario(path, raw, agent, targets)
 
-
-def with_agents(scenario: Scenario, agents: int) -> Scenario:
-    return replace(scenario, agent=replace(scenario.agent, agents=agents), raw={**scenario.raw, "agents": agents})

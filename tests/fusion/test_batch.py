@@ -254,3 +254,23 @@ def test_bad_operation_shapes(rng):
         batch.fast_ci(other)
     with pytest.raises(ValueError, match="expected a GaussianBatch"):
         batch.fuse(other.to_gaussians()[0])
+
+
+def test_non_finite_inputs_are_rejected(rng):
+    batch = GaussianBatch.from_gaussians(_random_gaussians(rng, 3, 6, far=True))
+    bad = np.eye(6)
+    bad[2, 3] = np.nan
+    with pytest.raises(ValueError, match="process noise Q contains non-finite"):
+        batch.predict(np.eye(6), bad)
+    with pytest.raises(ValueError, match="transition matrix F contains non-finite"):
+        batch.predict(bad, np.eye(6))
+    z = np.zeros((3, 3))
+    z[1, 0] = np.inf
+    with pytest.raises(ValueError, match="measurements z contains non-finite"):
+        batch.update(np.eye(3, 6), np.eye(3), z)
+    with pytest.raises(ValueError, match="measurement matrix H contains non-finite"):
+        batch.update(bad[:3], np.eye(3), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="sensor positions contains non-finite"):
+        batch.eif_update_bearing3d(np.array([0.0, np.nan, 0.0]), np.eye(2), np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="measurements z contains non-finite"):
+        batch.eif_update_bearing3d(np.zeros(3), np.eye(2), np.full((3, 2), np.nan))

@@ -31,7 +31,8 @@ def _linear_problem(seed, model_kind, spatial_dims):
     if model_kind == "cv":
         model = ConstantVelocity(spatial_dims=spatial_dims, q=float(rng.uniform(0.01, 2.0)))
     else:
-        model = Singer(spatial_dims=spatial_dims, alpha=float(rng.uniform(0.05, 1.0)), sigma_m=float(rng.uniform(0.2, 2)))
+        alpha, sigma_m = float(rng.uniform(0.05, 1.0)), float(rng.uniform(0.2, 2))
+        model = Singer(spatial_dims=spatial_dims, alpha=alpha, sigma_m=sigma_m)
     n = model.dim
     R = random_spd(rng, spatial_dims, ridge=0.05)
     meas = PositionMeasurement(n, R, spatial_dims=spatial_dims)

@@ -1,0 +1,75 @@
+"""``python -m agent``: run one agent process (normally started by ``skymesh run``).
+
+Example: ``python -m agent --id uav0 --index 0 --fleet demo --scenario run/scenario.json
+--connect tcp/127.0.0.1:7447 --epoch 1700000000.0 --out run/``. With ``--zenoh-config FILE`` the agent
+uses a standard Zenoh JSON5 configuration instead (a real deployment across machines).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+from agent.agent import Agent
+from agent.config import AgentScenario, read_scenario_file
+from agent.runtime import SimClock, install_stop_handlers, run_steps, write_json
+from agent.transport import Keys, ZenohTransport, load_config
+
+log = logging.getLogger("skymesh.agent")
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m agent", description="Run one skymesh agent process.")
+    p.add_argument("--id", required=True, help="agent name, unique in the fleet")
+    p.add_argument("--index", type=int, required=True, help="0-based index of the agent in the team")
+    p.add_argument("--fleet", required=True, help="fleet name (isolates concurrent runs)")
+    p.add_argument("--scenario", required=True, help="scenario TOML (or the launcher's scenario.json)")
+    p.add_argument("--connect", action="append", default=[], help="Zenoh router endpoint, e.g. tcp/127.0.0.1:7447")
+    p.add_argument("--zenoh-config", help="a Zenoh JSON5 config file (instead of --connect)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--epoch", type=float, default=None, help="wall time of simulation t=0 (default: now)")
+    p.add_argument("--speed", type=float, default=1.0, help="simulation seconds per wall second")
+    p.add_argument("--duration", type=float, default=None, help="override the scenario duration [s]")
+    p.add_argument("--fleet-key-file", help="file holding the fleet's HMAC key")
+    p.add_argument("--out", default=".", help="folder for agent-<id>.json")
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    args = parse_args(argv)
+    try:
+        scenario = AgentScenario.from_dict(read_scenario_file(args.scenario))
+        key = Path(args.fleet_key_file).read_bytes().strip() if args.fleet_key_file else None
+        keys = Keys(args.fleet)
+        config = load_config(args.connect, args.zenoh_config)
+    except (OSError, ValueError) as err:
+        print(f"agent {args.id}: {err}", file=sys.stderr)
+        return 2
+    duration = args.duration if args.duration is not None else scenario.duration
+    subscribe = [f"{keys.root}/belief/**", keys.telemetry("*"), keys.sim("truth")]
+    transport = ZenohTransport(args.id, keys, config, subscribe)
+    agent = Agent(args.id, args.index, scenario, transport, keys, seed=args.seed, fleet_key=key)
+    stop = threading.Event()
+    install_stop_handlers(stop)
+    clock = SimClock(args.epoch if args.epoch is not None else time.time(), args.speed)
+    try:
+        stats = run_steps(agent.step, clock, scenario.step, duration, stop)
+    finally:
+        transport.close()
+    metrics = {"pid": os.getpid(), **agent.metrics(), **stats.as_dict(), "transport_dropped": transport.dropped}
+    try:
+        write_json(Path(args.out) / f"agent-{args.id}.json", metrics)
+    except OSError as err:
+        print(f"agent {args.id}: cannot write its metrics: {err}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""The live harness: run an :class:`~agent.agent.Agent` on the wall clock, one process per agent.
+
+Simulation time is ``t = (wall - epoch) * speed``, with ``epoch`` and ``speed`` given by the launcher,
+so every process of a run shares one clock without exchanging it. Step ``k`` runs at ``t = k * dt``;
+a step that ends after the next one was due is a deadline miss, and when the agent is late by more
+than a step it skips ahead to the current time (tracks then advance over several grid epochs) rather
+than falling further behind.
+
+The process stops at the end of the scenario, on SIGTERM or SIGINT, or when its parent dies (the
+launcher never leaves orphans, and a child never outlives a launcher that was killed).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import resource
+import signal
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+log = logging.getLogger("skymesh.runtime")
+
+
+@dataclass(frozen=True)
+class SimClock:
+    epoch: float  # wall-clock time [s since the Unix epoch] of simulation time 0
+    speed: float = 1.0  # simulation seconds per wall second
+
+    def __post_init__(self):
+        if not self.speed > 0:
+            raise ValueError(f"clock speed must be positive, got {self.speed}")
+
+    def now(self) -> float:
+        return (time.time() - self.epoch) * self.speed
+
+    def wall(self, t: float) -> float:
+        return self.epoch + t / self.speed
+
+
+def install_stop_handlers(stop: threading.Event) -> None:
+    """SIGTERM and SIGINT set ``stop`` instead of killing the process mid-write."""
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+
+
+def parent_alive(parent_pid: int) -> bool:
+    return os.getppid() == parent_pid
+
+
+@dataclass
+class LoopStats:
+    steps: int = 0
+    deadline_misses: int = 0
+    skipped_steps: int = 0
+    cpu_s: float = 0.0
+
+    def as_dict(self) -> dict:
+        return {
+            "deadline_misses": self.deadline_misses,
+            "skipped_steps": self.skipped_steps,
+            "cpu_per_step_ms": 1e3 * self.cpu_s / self.steps if self.steps else None,
+            "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        }
+
+
+def run_steps(step_fn, clock: SimClock, dt: float, duration: float, stop: threading.Event) -> LoopStats:
+    """Call ``step_fn(t)`` at ``t = k dt`` on ``clock`` until ``duration``, ``stop`` or orphaning."""
+    stats = LoopStats()
+    parent = os.getppid()
+    k = 0
+    while not stop.is_set() and k * dt <= duration + 1e-9:
+        t = k * dt
+        delay = clock.wall(t) - time.time()
+        if delay > 0 and stop.wait(delay):
+            break
+        if not parent_alive(parent):
+            log.error("parent process is gone; stopping")
+            break
+        cpu = time.process_time()
+        step_fn(t)
+        stats.cpu_s += time.process_time() - cpu
+        stats.steps += 1
+        if time.time() > clock.wall(t + dt):
+            stats.deadline_misses += 1
+        k_next = max(k + 1, int(clock.now() / dt))
+        stats.skipped_steps += k_next - k - 1
+        k = k_next
+    return stats
+
+
+def write_json(path: str | Path, data: dict) -> None:
+    """Write atomically (temporary file + rename), so a reader never sees half a file."""
+    path = Path(path)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=_plain))
+    os.replace(tmp, path)
+
+
+def _plain(value):
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")

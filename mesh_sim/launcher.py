@@ -1,0 +1,162 @@
+"""``skymesh run``: start a whole team on this machine and collect the results.
+
+The launcher opens the Zenoh router itself (loopback, multicast scouting off, a free port), then starts
+the world process, N agent processes and — unless ``--rerun off`` — the observer that writes the Rerun
+recording, each as ``python -m ...`` (never by forking this process). It shows progress, and stops
+everything on completion, on Ctrl-C and as soon as a child dies: SIGTERM by PID, then SIGKILL by PID
+after a grace period. Every child also exits by itself if the launcher disappears.
+
+The run folder holds ``scenario.json`` (the effective scenario), ``logs/``, each process's own
+metrics, the merged ``metrics.json``, ``recording.rrd`` and ``plots/``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zenoh
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+from agent.transport import router_config
+from mesh_sim import results
+from mesh_sim.scenario import Scenario
+
+STARTUP_S = 2.0  # wall seconds given to processes to start before simulation time 0; chosen here
+STARTUP_PER_AGENT_S = 0.15
+GRACE_S = 10.0  # wall seconds between SIGTERM and SIGKILL
+
+
+@dataclass
+class Child:
+    name: str
+    role: str  # "agent", "world" or "observer"
+    process: subprocess.Popen
+    log_path: Path
+
+
+@dataclass
+class RunOutcome:
+    run_dir: Path
+    status: str  # "completed", "interrupted" or "failed: <why>"
+    metrics: dict = field(default_factory=dict)
+    pids: dict = field(default_factory=dict)
+
+
+def free_port() -> int:
+    """A TCP port on loopback that was free a moment ago (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def new_run_dir(base: Path, name: str) -> Path:
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    path = base / f"{name}-{stamp}-{uuid.uuid4().hex[:4]}"
+    path.mkdir(parents=True)
+    return path
+
+
+class Launcher:
+    def __init__(self, scenario: Scenario, run_dir: Path, speed: float = 1.0, rerun: str = "save",
+                 console: Console | None = None, extra_env: dict | None = None):
+        if not speed > 0:
+            raise ValueError(f"--speed must be positive, got {speed}")
+        if rerun not in ("save", "spawn", "off") and not rerun.startswith("connect:"):
+            raise ValueError(f"--rerun must be save, spawn, off or connect:URL, got {rerun!r}")
+        self.scenario = scenario
+        self.run_dir = run_dir
+        self.speed = speed
+        self.rerun = rerun
+        self.console = console or Console(stderr=True)
+        self.env = {**os.environ, **(extra_env or {})}
+        self.fleet = f"{scenario.name}-{uuid.uuid4().hex[:8]}"
+        self.children: list[Child] = []
+
+    # -- lifecycle --------------------------------------------------------------------------------
+    def run(self) -> RunOutcome:
+        sc = self.scenario.agent
+        scenario_file = self.run_dir / "scenario.json"
+        scenario_file.write_text(json.dumps(self.scenario.raw, indent=2))
+        (self.run_dir / "logs").mkdir(exist_ok=True)
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        router = zenoh.open(router_config([endpoint]))
+        epoch = time.time() + STARTUP_S + STARTUP_PER_AGENT_S * sc.agents
+        status = "completed"
+        try:
+            self._start_all(scenario_file, endpoint, epoch)
+            status = self._monitor(epoch)
+        except KeyboardInterrupt:
+            status = "interrupted"
+        finally:
+            self._stop_all()
+            router.close()
+        metrics = results.collect(self.run_dir, self.scenario, status, self.speed)
+        return RunOutcome(self.run_dir, status, metrics, {c.name: c.process.pid for c in self.children})
+
+    def _start_all(self, scenario_file: Path, endpoint: str, epoch: float) -> None:
+        sc = self.scenario.agent
+        common = ["--fleet", self.fleet, "--connect", endpoint]
+        timing = ["--epoch", repr(epoch), "--speed", repr(self.speed)]
+        if self.rerun != "off":
+            view = {"save": ["--save", str(self.run_dir / "recording.rrd")], "spawn": ["--spawn"]}.get(
+                self.rerun, ["--connect-viewer", self.rerun.removeprefix("connect:")]
+            )
+            self._spawn("observer", "observer", ["-m", "mesh_sim.observer", *common, *view])
+        self._spawn("world", "world", ["-m", "mesh_sim.world", *common, *timing, "--scenario", str(scenario_file),
+                                       "--duration", repr(sc.duration), "--out", str(self.run_dir)])
+        for i in range(sc.agents):
+            self._spawn(f"uav{i}", "agent", [
+                "-m", "agent", "--id", f"uav{i}", "--index", str(i), "--scenario", str(scenario_file),
+                "--seed", str(sc.seed * 1000 + i), "--out", str(self.run_dir), *common, *timing,
+            ])
+
+    def _spawn(self, name: str, role: str, args: list[str]) -> None:
+        log_path = self.run_dir / "logs" / f"{name}.log"
+        with open(log_path, "wb") as log:
+            proc = subprocess.Popen([sys.executable, *args], stdout=log, stderr=subprocess.STDOUT,
+                                    stdin=subprocess.DEVNULL, env=self.env)
+        self.children.append(Child(name, role, proc, log_path))
+
+    def _monitor(self, epoch: float) -> str:
+        """Wait for the agents to finish; return the run's status."""
+        duration = self.scenario.agent.duration
+        progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
+                            TextColumn("t={task.completed:.0f}/{task.total:.0f} s"), TimeRemainingColumn(),
+                            console=self.console, transient=True)
+        with progress:
+            task = progress.add_task(f"{self.scenario.name}: {self.scenario.agent.agents} agents", total=duration)
+            while True:
+                time.sleep(0.2)
+                sim_t = max(0.0, (time.time() - epoch) * self.speed)
+                progress.update(task, completed=min(sim_t, duration))
+                for child in self.children:
+                    code = child.process.poll()
+                    if code is not None and (code != 0 or child.role != "agent"):
+                        if child.role == "world" and code == 0 and sim_t >= duration:
+                            continue
+                        return f"failed: {child.name} (pid {child.process.pid}) exited with code {code}"
+                if all(c.process.poll() == 0 for c in self.children if c.role == "agent"):
+                    return "completed"
+
+    def _stop_all(self) -> None:
+        """SIGTERM every child still running (by PID), wait, then SIGKILL the stragglers (by PID)."""
+        for child in self.children:
+            if child.process.poll() is None:
+                child.process.send_signal(signal.SIGTERM)
+        deadline = time.time() + GRACE_S
+        for child in self.children:
+            try:
+                child.process.wait(timeout=max(0.1, deadline - time.time()))
+            except subprocess.TimeoutExpired:
+                child.process.kill()
+                child.process.wait()

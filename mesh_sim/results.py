@@ -1,0 +1,126 @@
+"""Merge a run's per-process metrics into ``metrics.json``, print the summary table, draw the plots.
+
+Fleet figures pool every (agent, target) pair by samples: ``rmse = sqrt(sum n_i rmse_i^2 / sum n_i)``
+and ``anees = sum n_i anees_i / sum n_i``, likewise for the oracle, so ``rmse_ratio_to_oracle`` compares
+like with like.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from agent.runtime import write_json
+
+
+def pooled(targets: list[dict]) -> tuple[float | None, float | None]:
+    """Sample-weighted RMSE and ANEES over a list of per-target scores."""
+    n = np.array([t.get("samples", 0) for t in targets if t.get("rmse") is not None], float)
+    if n.sum() == 0:
+        return None, None
+    rmse = np.array([t["rmse"] for t in targets if t.get("rmse") is not None])
+    anees = np.array([t["anees"] for t in targets if t.get("rmse") is not None])
+    return float(np.sqrt(np.sum(n * rmse**2) / n.sum())), float(np.sum(n * anees) / n.sum())
+
+
+def _read(path: Path) -> dict | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+
+
+def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
+    sc = scenario.agent
+    agents = []
+    for i in range(sc.agents):
+        data = _read(run_dir / f"agent-uav{i}.json")
+        agents.append(data if data is not None else {"id": f"uav{i}", "status": "died: no metrics written"})
+    oracle = _read(run_dir / "oracle.json") or {"targets": [], "status": "missing"}
+    all_targets = [t for a in agents for t in a.get("targets", [])]
+    rmse, anees = pooled(all_targets)
+    oracle_rmse, oracle_anees = pooled(oracle.get("targets", []))
+    tx = [a["bytes_tx"] for a in agents if "bytes_tx" in a]
+    metrics = {
+        "status": status,
+        "agents": agents,
+        "oracle": {**oracle, "rmse": oracle_rmse, "anees": oracle_anees},
+        "fleet": {
+            "rmse": rmse,
+            "anees": anees,
+            "rmse_ratio_to_oracle": rmse / oracle_rmse if rmse is not None and oracle_rmse else None,
+            "bytes_per_agent_per_s": float(np.mean(tx)) / sc.duration if tx else None,
+            "targets_tracked_by_every_agent": _tracked_by_all(agents, scenario),
+        },
+        "config": {**scenario.raw, "speed": speed},
+    }
+    write_json(run_dir / "metrics.json", metrics)
+    try:
+        plot(metrics, run_dir / "plots")
+    except (OSError, ValueError) as err:  # a plot is a convenience; the metrics are already written
+        Console(stderr=True).print(f"[yellow]plots skipped: {err}")
+    return metrics
+
+
+def _tracked_by_all(agents: list[dict], scenario) -> bool:
+    ids = {t.id for t in scenario.targets}
+    return all(ids <= {t["target"] for t in a.get("targets", []) if t.get("rmse") is not None} for a in agents)
+
+
+def _fmt(value, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def summary_table(metrics: dict) -> Table:
+    table = Table(title=f"skymesh run — {metrics['status']}")
+    for col in ("agent", "RMSE [m]", "ANEES", "targets", "first track [s]", "bytes/s", "rejected", "deadline misses"):
+        table.add_column(col, justify="right")
+    duration = metrics["config"]["duration"]
+    for a in metrics["agents"]:
+        if "targets" not in a:
+            table.add_row(a["id"], a.get("status", "?"), *["-"] * 6)
+            continue
+        rmse, anees = pooled(a["targets"])
+        firsts = [t["time_to_first_track"] for t in a["targets"] if t["time_to_first_track"] is not None]
+        tracked = sum(t["rmse"] is not None for t in a["targets"])
+        table.add_row(
+            a["id"], _fmt(rmse, ".2f"), _fmt(anees, ".2f"), f"{tracked}/{len(a['targets'])}",
+            _fmt(max(firsts) if firsts else None, ".1f"), f"{a['bytes_tx'] / duration:,.0f}",
+            str(a["msgs_rejected"]), str(a.get("deadline_misses", "-")),
+        )
+    o, f = metrics["oracle"], metrics["fleet"]
+    table.add_row("oracle", _fmt(o["rmse"], ".2f"), _fmt(o["anees"], ".2f"), "", "", "", "", "", style="dim")
+    table.add_row("fleet", _fmt(f["rmse"], ".2f"), _fmt(f["anees"], ".2f"),
+                  f"ratio {_fmt(f['rmse_ratio_to_oracle'], '.2f')}", "", _fmt(f["bytes_per_agent_per_s"], ",.0f"),
+                  "", "", style="bold")
+    return table
+
+
+def plot(metrics: dict, folder: Path) -> None:
+    """Per-target RMSE of every agent beside the oracle's (``plots/rmse.png``)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    folder.mkdir(exist_ok=True)
+    targets = sorted({t["target"] for a in metrics["agents"] for t in a.get("targets", [])})
+    if not targets:
+        return
+    series = {a["id"]: {t["target"]: t["rmse"] for t in a.get("targets", [])} for a in metrics["agents"]}
+    series["oracle"] = {t["target"]: t["rmse"] for t in metrics["oracle"].get("targets", [])}
+    fig, ax = plt.subplots(figsize=(7, 4))
+    width = 0.8 / len(series)
+    for k, (name, values) in enumerate(series.items()):
+        xs = np.arange(len(targets)) + k * width
+        ax.bar(xs, [values.get(t) or 0.0 for t in targets], width, label=name)
+    ax.set_xticks(np.arange(len(targets)) + 0.4 - width / 2, targets)
+    ax.set_ylabel("position RMSE [m]")
+    ax.legend(fontsize="small", ncols=2)
+    fig.tight_layout()
+    fig.savefig(folder / "rmse.png", dpi=100)
+    plt.close(fig)
