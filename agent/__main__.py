@@ -37,6 +37,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--duration", type=float, default=None, help="override the scenario duration [s]")
     p.add_argument("--fleet-key-file", help="file holding the fleet's HMAC key")
     p.add_argument("--out", default=".", help="folder for agent-<id>.json")
+    p.add_argument("--parent-pid", type=int, help="exit when this process (the launcher) is gone")
     return p.parse_args(argv)
 
 
@@ -59,7 +60,7 @@ def main(argv=None) -> int:
     install_stop_handlers(stop)
     clock = SimClock(args.epoch if args.epoch is not None else time.time(), args.speed)
     try:
-        stats = run_steps(agent.step, clock, scenario.step, duration, stop)
+        stats = run_steps(agent.step, clock, scenario.step, duration, stop, args.parent_pid)
     finally:
         transport.close()
     metrics = {"pid": os.getpid(), **agent.metrics(), **stats.as_dict(), "transport_dropped": transport.dropped}

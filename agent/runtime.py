@@ -67,10 +67,14 @@ class LoopStats:
         }
 
 
-def run_steps(step_fn, clock: SimClock, dt: float, duration: float, stop: threading.Event) -> LoopStats:
-    """Call ``step_fn(t)`` at ``t = k dt`` on ``clock`` until ``duration``, ``stop`` or orphaning."""
+def run_steps(step_fn, clock: SimClock, dt: float, duration: float, stop: threading.Event,
+              parent_pid: int | None = None) -> LoopStats:
+    """Call ``step_fn(t)`` at ``t = k dt`` on ``clock`` until ``duration``, ``stop`` or orphaning.
+
+    ``parent_pid`` is the launcher's PID as the launcher gave it: checking against ``os.getppid()`` taken
+    here would miss a launcher that died while this process was still importing."""
     stats = LoopStats()
-    parent = os.getppid()
+    parent = os.getppid() if parent_pid is None else parent_pid
     k = 0
     while not stop.is_set() and k * dt <= duration + 1e-9:
         t = k * dt

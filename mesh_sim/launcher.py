@@ -105,7 +105,7 @@ class Launcher:
 
     def _start_all(self, scenario_file: Path, endpoint: str, epoch: float) -> None:
         sc = self.scenario.agent
-        common = ["--fleet", self.fleet, "--connect", endpoint]
+        common = ["--fleet", self.fleet, "--connect", endpoint, "--parent-pid", str(os.getpid())]
         timing = ["--epoch", repr(epoch), "--speed", repr(self.speed)]
         if self.rerun != "off":
             view = {"save": ["--save", str(self.run_dir / "recording.rrd")], "spawn": ["--spawn"]}.get(

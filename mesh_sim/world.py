@@ -80,6 +80,7 @@ def main(argv=None) -> int:
     p.add_argument("--speed", type=float, default=1.0)
     p.add_argument("--duration", type=float, required=True)
     p.add_argument("--out", default=".")
+    p.add_argument("--parent-pid", type=int, help="exit when this process (the launcher) is gone")
     args = p.parse_args(argv)
     try:
         scenario = load(args.scenario)
@@ -110,7 +111,7 @@ def main(argv=None) -> int:
     clock = SimClock(args.epoch, args.speed)
     started = time.time()
     try:
-        stats = run_steps(tick, clock, 1.0 / TRUTH_RATE_HZ, args.duration + 1.0, stop)
+        stats = run_steps(tick, clock, 1.0 / TRUTH_RATE_HZ, args.duration + 1.0, stop, args.parent_pid)
     finally:
         transport.close()
     write_json(Path(args.out) / "oracle.json", {

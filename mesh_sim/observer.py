@@ -1,0 +1,485 @@
+"""The ground station: one process that watches a fleet on Zenoh and does all the Rerun logging (DESIGN.md §7).
+
+Agents stay light (no Rerun in them); the observer subscribes to ``telemetry/*``, ``belief/**`` and
+``sim/truth`` of one fleet, validates every message exactly as an agent would (``agent.wire.decode``
+plus payload checks; rejects are counted by reason, logged once per (peer, reason), never raised), and
+logs one recording. The same observer works against a real fleet: it only needs a Zenoh endpoint.
+
+What is logged, on the ``sim_time`` timeline (a duration, from each envelope's stamp), in NED
+(``world`` carries a static ``RIGHT_HAND_Z_DOWN`` view coordinate: x north, y east, z down)::
+
+    world/truth                    Points3D      truth targets, labelled by id
+    world/uav/<id>                 Points3D      each UAV's position
+    world/uav/<id>/path            LineStrips3D  its last PATH_POINTS positions
+    world/agents/<id>/tracks       Ellipsoids3D  2-sigma position ellipsoids of the agent's tracks
+    world/agents/<id>/rays         LineStrips3D  bearing rays from the UAV (RAY_LENGTH m or to z=0 ground)
+    world/links                    LineStrips3D  agent-neighbour links: green if both ends report the link,
+                                                 orange if only one does
+    metrics/<id>/tracks            Scalars       number of tracks the agent reports
+    metrics/<id>/bytes_rx          Scalars       the agent's own received-bytes count, if its telemetry has one
+    metrics/<id>/bytes_seen        Scalars       bytes the observer has received from the agent (all kinds)
+
+Run as a process (the launcher stops it with SIGTERM; it also exits when its parent dies)::
+
+    python -m mesh_sim.observer --fleet F --connect tcp/127.0.0.1:7447 --save run.rrd [--duration S]
+    python -m mesh_sim.observer --fleet F --zenoh-config robot.json5 --connect-viewer rerun+http://host:9876/proxy
+
+``--parent-pid PID`` makes it exit when PID is no longer its parent (default: its parent at start).
+
+``--spawn`` starts a live Rerun viewer; it needs the ``rerun`` viewer binary and a display (on a
+headless machine the viewer dies and shutdown waits several seconds — never use it in tests).
+
+Rerun is imported here and nowhere else in the project.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import re
+import signal
+import sys
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Sequence
+
+import numpy as np
+import rerun as rr
+import zenoh
+
+from agent import wire
+from agent.transport import Incoming, Keys, ZenohTransport, load_config
+from fusion.measurement import azel_to_los
+
+log = logging.getLogger("skymesh.observer")
+
+PATH_POINTS = 500  # positions kept per UAV path (chosen here)
+RAY_LENGTH = 150.0  # m; a ray stops earlier where it meets flat ground z = 0 (chosen here)
+LINK_STALE_S = 5.0  # s of sim time: an agent's neighbour report older than this draws no link (chosen here)
+BATCH_SECONDS = 1.0  # Rerun's chunk batcher tick: rows of up to this long share a chunk (default 0.2 s; chosen here)
+POLL_S = 0.05  # s between queue drains in the process loop
+SYM_RTOL = 1e-6  # position covariance symmetry tolerance, relative to its largest entry
+PSD_RTOL = 1e-9  # smallest eigenvalue allowed, relative to the largest (negatives are clipped to 0)
+
+_AGENT_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")  # as agent.wire
+GREEN = (40, 200, 60)
+ORANGE = (255, 150, 0)
+TRUTH_COLOUR = (230, 40, 40)
+PALETTE = [(31, 119, 180), (148, 103, 189), (23, 190, 207), (188, 189, 34), (227, 119, 194), (140, 86, 75),
+           (127, 127, 127), (44, 160, 44), (255, 187, 120), (174, 199, 232)]
+
+
+# -- geometry ------------------------------------------------------------------------------------------
+def cov_to_ellipsoid(cov, n_sigma: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Half-sizes and rotation (quaternion x, y, z, w) of the ``n_sigma`` ellipsoid of a 3x3 covariance.
+
+    With ``R`` the rotation of the quaternion, ``R @ diag((half_sizes / n_sigma) ** 2) @ R.T == cov``
+    (up to rounding; negative eigenvalues from rounding are clipped to zero)."""
+    cov = np.asarray(cov, dtype=np.float64)
+    if cov.shape != (3, 3) or not np.all(np.isfinite(cov)):
+        raise ValueError(f"need a finite 3x3 covariance, got shape {cov.shape}")
+    w, v = np.linalg.eigh(0.5 * (cov + cov.T))
+    if np.linalg.det(v) < 0:
+        v[:, 2] = -v[:, 2]  # a proper rotation (columns are eigenvectors; the sign of one is free)
+    half = n_sigma * np.sqrt(np.maximum(w, 0.0))
+    return half, _matrix_to_quat_xyzw(v)
+
+
+def _matrix_to_quat_xyzw(m: np.ndarray) -> np.ndarray:
+    """Unit quaternion (x, y, z, w) of a rotation matrix (Shepperd: divide by the largest component)."""
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    candidates = (tr, m[0, 0], m[1, 1], m[2, 2])
+    i = int(np.argmax(candidates))
+    if i == 0:
+        s = 2.0 * np.sqrt(1.0 + tr)
+        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
+    else:
+        a = i - 1
+        b, c = (a + 1) % 3, (a + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + m[a, a] - m[b, b] - m[c, c])
+        q = [0.0, 0.0, 0.0, (m[c, b] - m[b, c]) / s]
+        q[a] = 0.25 * s
+        q[b] = (m[b, a] + m[a, b]) / s
+        q[c] = (m[c, a] + m[a, c]) / s
+    q = np.asarray(q)
+    return q / np.linalg.norm(q)
+
+
+def quat_xyzw_to_matrix(q) -> np.ndarray:
+    """The rotation matrix of a unit quaternion (x, y, z, w)."""
+    x, y, z, w = np.asarray(q, dtype=np.float64)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def ray_end(origin: np.ndarray, azel, length: float = RAY_LENGTH) -> np.ndarray:
+    """End of a bearing ray from ``origin`` (NED): ``length`` metres, or less where it reaches z = 0."""
+    los = azel_to_los(azel)
+    if los[2] > 1e-9 and origin[2] < 0.0:
+        length = min(length, -origin[2] / los[2])
+    return origin + length * los
+
+
+# -- payload validation (raises wire.DecodeError, like the agents' own checks) --------------------------
+def _vector(value, n: int | None, name: str) -> np.ndarray:
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "fiu":
+            raise wire.DecodeError("bad_type", f"{name} must be numeric")
+        arr = value.astype(np.float64)
+    elif isinstance(value, list | tuple) and all(
+        isinstance(x, int | float) and not isinstance(x, bool) for x in value
+    ):
+        arr = np.asarray(value, dtype=np.float64)
+    else:
+        raise wire.DecodeError("bad_type", f"{name} must be a numeric array")
+    if n is not None and arr.shape != (n,):
+        raise wire.DecodeError("bad_shape", f"{name} has shape {arr.shape}, expected ({n},)")
+    if not np.all(np.isfinite(arr)):
+        raise wire.DecodeError("non_finite", f"{name} is not finite")
+    return arr
+
+
+def _matrix(value, name: str) -> np.ndarray:
+    if not isinstance(value, np.ndarray) or value.dtype.kind != "f":
+        raise wire.DecodeError("bad_type", f"{name} must be a float array")
+    if not np.all(np.isfinite(value)):
+        raise wire.DecodeError("non_finite", f"{name} is not finite")
+    return value.astype(np.float64)
+
+
+def _track_id(value) -> str:
+    if isinstance(value, bool) or not isinstance(value, int | str) or (isinstance(value, str) and len(value) > 64):
+        raise wire.DecodeError("bad_field", "a track or target id must be an int or a short str")
+    return str(value)
+
+
+def parse_truth(payload: dict) -> tuple[list[str], np.ndarray]:
+    targets = payload.get("targets")
+    if not isinstance(targets, list):
+        raise wire.DecodeError("bad_field", "payload.targets must be a list")
+    ids, positions = [], []
+    for tg in targets:
+        if not isinstance(tg, dict) or "position" not in tg:
+            raise wire.DecodeError("bad_field", "each target needs an id and a position")
+        ids.append(_track_id(tg.get("id")))
+        positions.append(_vector(tg["position"], 3, "target position"))
+    return ids, np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+
+
+def parse_telemetry(payload: dict) -> dict:
+    """Checked telemetry: position (3,), bearings (k, 2), neighbours [str], tracks [(id, centre, cov3)]."""
+    if "position" not in payload:
+        raise wire.DecodeError("bad_field", "telemetry needs a position")
+    out = {"position": _vector(payload["position"], 3, "position")}
+    bearings = payload.get("bearings")
+    if bearings is None:
+        out["bearings"] = np.zeros((0, 2))
+    else:
+        b = _matrix(bearings, "bearings") if isinstance(bearings, np.ndarray) else None
+        if b is None or b.ndim != 2 or b.shape[1] != 2:
+            raise wire.DecodeError("bad_shape", "bearings must be a (k, 2) float array")
+        out["bearings"] = b
+    neighbours = payload.get("neighbours", [])
+    if not isinstance(neighbours, list) or not all(isinstance(n, str) and _AGENT_ID.fullmatch(n) for n in neighbours):
+        raise wire.DecodeError("bad_field", "neighbours must be a list of agent ids")
+    out["neighbours"] = set(neighbours)
+    tracks = payload.get("tracks", [])
+    if not isinstance(tracks, list):
+        raise wire.DecodeError("bad_field", "tracks must be a list")
+    parsed = []
+    for tr in tracks:
+        if not isinstance(tr, dict) or "mean" not in tr or "cov" not in tr:
+            raise wire.DecodeError("bad_field", "each track needs an id, a mean and a cov")
+        tid = _track_id(tr.get("id"))
+        mean = _vector(tr["mean"], None, "track mean")
+        cov = _matrix(tr["cov"], "track cov")
+        if mean.ndim != 1 or mean.size < 3 or cov.shape != (mean.size, mean.size):
+            raise wire.DecodeError("bad_shape", f"track mean {mean.shape} and cov {cov.shape} do not match")
+        p = cov[:3, :3]
+        scale = max(float(np.max(np.abs(p))), 1e-300)
+        if np.max(np.abs(p - p.T)) > SYM_RTOL * scale or np.linalg.eigvalsh(0.5 * (p + p.T))[0] < -PSD_RTOL * scale:
+            raise wire.DecodeError("indefinite", "track position covariance is not symmetric PSD")
+        parsed.append((tid, mean[:3], p))
+    out["tracks"] = parsed
+    rx = payload.get("bytes_rx")
+    numeric = isinstance(rx, int | float) and not isinstance(rx, bool)
+    out["bytes_rx"] = float(rx) if numeric and np.isfinite(rx) else None
+    return out
+
+
+# -- the observer ------------------------------------------------------------------------------------
+class Observer:
+    """Turns validated fleet messages into one Rerun recording. Not thread-safe: call from one thread."""
+
+    def __init__(self, keys: Keys, recording_id: str, application_id: str = "skymesh", *,
+                 fleet_key: bytes | None = None, n_sigma: float = 2.0, path_points: int = PATH_POINTS,
+                 ray_length: float = RAY_LENGTH, batch_seconds: float = BATCH_SECONDS):
+        self.keys = keys
+        self.fleet_key = fleet_key
+        self.n_sigma = n_sigma
+        self.path_points = path_points
+        self.ray_length = ray_length
+        self.rec = rr.RecordingStream(application_id, recording_id=recording_id,
+                                      batcher_config=rr.ChunkBatcherConfig(flush_tick=batch_seconds))
+        self.accepted = 0
+        self.rejected: Counter = Counter()  # reason -> messages
+        self.bytes_seen: Counter = Counter()  # origin -> bytes of accepted messages
+        self._logged: set[tuple[str, str]] = set()
+        self._sinks: list = []
+        self._last_seq: dict[tuple[str, str], int] = {}
+        self._colours: dict[str, tuple[int, int, int]] = {}
+        self._paths: dict[str, deque] = {}
+        self._positions: dict[str, np.ndarray] = {}
+        self._reports: dict[str, tuple[float, set[str]]] = {}  # agent -> (stamp, neighbours it reports)
+        self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
+
+    # sinks ------------------------------------------------------------------------------------------
+    def save(self, path) -> None:
+        """Also write the recording to an .rrd file (what was logged before is included)."""
+        self._add_sink(rr.FileSink(str(path)))
+
+    def connect(self, url: str = "rerun+http://127.0.0.1:9876/proxy") -> None:
+        """Also stream to a Rerun viewer or proxy over gRPC (``rerun+http://host:port/proxy``)."""
+        self._add_sink(rr.GrpcSink(url))
+
+    def spawn(self, port: int = 9876) -> None:
+        """Start a live Rerun viewer and stream to it. Needs the ``rerun`` binary and a display
+        (X11/Wayland); on a headless machine the viewer dies and this returns after ~11 s."""
+        self.rec.spawn(port=port, connect=False)
+        self._add_sink(rr.GrpcSink(f"rerun+http://127.0.0.1:{port}/proxy"))
+
+    def _add_sink(self, sink) -> None:
+        self._sinks.append(sink)
+        self.rec.set_sinks(*self._sinks)
+
+    def close(self) -> None:
+        """Flush everything to the sinks and close them (an .rrd is complete, with its footer, after this)."""
+        try:
+            self.rec.flush(timeout_sec=10.0)
+        finally:
+            self.rec.disconnect()
+
+    # input ------------------------------------------------------------------------------------------
+    def handle(self, incoming: Incoming) -> bool:
+        """Validate one sample and log it. Returns False (and counts the reason) if it was rejected."""
+        try:
+            parts = self.keys.parse(incoming.key)
+        except ValueError:
+            return self._reject("?", "bad_key")
+        if parts == ("sim", "truth"):
+            origin, kind = None, "truth"
+        elif len(parts) == 2 and parts[0] == "telemetry":
+            origin, kind = parts[1], "telemetry"
+        elif len(parts) == 3 and parts[0] == "belief":
+            origin, kind = parts[2], parts[1]
+        else:
+            return self._reject("?", "bad_key")
+        peer = origin or "world"
+        try:
+            env = wire.decode(incoming.data, expected_origin=origin, key=self.fleet_key, kinds=wire.KINDS | {kind})
+        except wire.DecodeError as err:
+            return self._reject(peer, err.reason)
+        if env.kind != kind:
+            return self._reject(peer, "kind_mismatch")
+        last = self._last_seq.get((env.origin, env.kind))
+        if last is not None and env.seq <= last:
+            return self._reject(peer, "duplicate", log_it=False)
+        try:
+            if kind == "truth":
+                parsed = parse_truth(env.payload)
+            elif kind == "telemetry":
+                parsed = parse_telemetry(env.payload)
+            else:
+                parsed = None  # beliefs: counted as bandwidth (telemetry carries the marginals we draw)
+        except wire.DecodeError as err:
+            return self._reject(peer, err.reason)
+        self._last_seq[(env.origin, env.kind)] = env.seq
+        self.accepted += 1
+        self.rec.set_time("sim_time", duration=env.stamp)
+        try:
+            if kind == "truth":
+                self._log_truth(*parsed)
+            else:
+                self.bytes_seen[env.origin] += len(incoming.data)
+                self.rec.log(f"metrics/{env.origin}/bytes_seen", rr.Scalars(float(self.bytes_seen[env.origin])))
+                if kind == "telemetry":
+                    self._log_telemetry(env.origin, env.stamp, parsed)
+        except Exception as err:  # a safety net: the observer never dies on input
+            log.warning("observer: could not log a %s from %s: %s", kind, peer, err)
+            self.rejected["log_error"] += 1
+            return False
+        return True
+
+    def _reject(self, peer: str, reason: str, log_it: bool = True) -> bool:
+        self.rejected[reason] += 1
+        if log_it and (peer, reason) not in self._logged:
+            self._logged.add((peer, reason))
+            log.warning("observer: rejected a message from %s (%s); further ones are only counted", peer, reason)
+        return False
+
+    # logging ----------------------------------------------------------------------------------------
+    def _colour(self, agent: str) -> tuple[int, int, int]:
+        if agent not in self._colours:
+            self._colours[agent] = PALETTE[len(self._colours) % len(PALETTE)]
+        return self._colours[agent]
+
+    def _log_truth(self, ids: list[str], positions: np.ndarray) -> None:
+        self.rec.log("world/truth", rr.Points3D(positions, radii=1.5, colors=[TRUTH_COLOUR] * len(ids),
+                                                labels=[f"T{i}" for i in ids]))
+
+    def _log_telemetry(self, agent: str, stamp: float, t: dict) -> None:
+        rec, colour, pos = self.rec, self._colour(agent), t["position"]
+        rec.log(f"world/uav/{agent}", rr.Points3D([pos], radii=2.0, colors=[colour], labels=[agent]))
+        path = self._paths.setdefault(agent, deque(maxlen=self.path_points))
+        path.append(pos)
+        if len(path) >= 2:
+            rec.log(f"world/uav/{agent}/path", rr.LineStrips3D([np.asarray(path)], radii=0.3, colors=[colour]))
+
+        centres, halves, quats, labels = [], [], [], []
+        for tid, centre, cov in t["tracks"]:
+            half, q = cov_to_ellipsoid(cov, self.n_sigma)
+            centres.append(centre)
+            halves.append(half)
+            quats.append(q)
+            labels.append(f"{agent}:T{tid}")
+        rec.log(f"world/agents/{agent}/tracks", rr.Ellipsoids3D(
+            centers=np.asarray(centres).reshape(-1, 3), half_sizes=np.asarray(halves).reshape(-1, 3),
+            quaternions=np.asarray(quats).reshape(-1, 4), colors=[colour] * len(labels), labels=labels,
+            fill_mode=rr.components.FillMode.MajorWireframe))
+
+        rays = [np.array([pos, ray_end(pos, azel, self.ray_length)]) for azel in t["bearings"]]
+        rec.log(f"world/agents/{agent}/rays", rr.LineStrips3D(rays, radii=0.15, colors=[colour] * len(rays)))
+
+        rec.log(f"metrics/{agent}/tracks", rr.Scalars(float(len(t["tracks"]))))
+        if t["bytes_rx"] is not None:
+            rec.log(f"metrics/{agent}/bytes_rx", rr.Scalars(t["bytes_rx"]))
+
+        self._positions[agent] = pos
+        self._reports[agent] = (stamp, t["neighbours"] - {agent})
+        self._log_links(stamp)
+
+    def link_states(self, now: float) -> dict[tuple[str, str], bool]:
+        """``{(a, b): both_ends_report}`` for a < b, from neighbour reports at most LINK_STALE_S old."""
+        fresh = {a: nbrs for a, (stamp, nbrs) in self._reports.items() if now - stamp <= LINK_STALE_S}
+        links: dict[tuple[str, str], bool] = {}
+        for a, nbrs in fresh.items():
+            for b in nbrs:
+                pair = (a, b) if a < b else (b, a)
+                links[pair] = a in fresh.get(b, ())
+        return links
+
+    def _log_links(self, now: float) -> None:
+        strips, colours = [], []
+        for (a, b), both in sorted(self.link_states(now).items()):
+            if a in self._positions and b in self._positions:
+                strips.append(np.array([self._positions[a], self._positions[b]]))
+                colours.append(GREEN if both else ORANGE)
+        self.rec.log("world/links", rr.LineStrips3D(strips, radii=0.4, colors=colours))
+
+
+# -- the process -------------------------------------------------------------------------------------
+def run_observer(fleet: str, connect: list[str] | None, zenoh_config: str | None, save: str | None,
+                 connect_viewer: str | None, spawn: bool, duration: float | None, *,
+                 recording_id: str | None = None, application_id: str = "skymesh",
+                 fleet_key: bytes | None = None, parent_pid: int | None = None) -> Observer:
+    """Watch ``fleet`` until ``duration`` s (wall clock) pass, SIGTERM/SIGINT arrives or the parent dies.
+
+    The parent is ``parent_pid`` if given (a launcher passes its own pid, so that even a parent that
+    died while this process was starting is noticed), else the parent at the time of the call; it is
+    taken as dead when ``os.getppid()`` no longer returns it. Returns the (closed) observer, whose
+    counters tell what was accepted and rejected."""
+    keys = Keys(fleet)
+    config = load_config(connect, zenoh_config)
+    observer = Observer(keys, recording_id or fleet, application_id, fleet_key=fleet_key)
+    if save:
+        observer.save(save)
+    if connect_viewer:
+        observer.connect(connect_viewer)
+    if spawn:
+        observer.spawn()
+
+    stop = False
+
+    def _stop(signum, frame):
+        nonlocal stop
+        stop = True
+
+    in_main = threading.current_thread() is threading.main_thread()  # signals can only be caught there
+    previous = {s: signal.signal(s, _stop) for s in (signal.SIGTERM, signal.SIGINT)} if in_main else {}
+    parent = os.getppid() if parent_pid is None else parent_pid
+    transport = None
+    try:
+        transport = ZenohTransport(
+            "observer", keys, config,
+            subscribe=[keys.telemetry("*"), f"{keys.root}/belief/**", keys.sim("truth")], liveliness=False,
+        )
+        deadline = None if duration is None else time.monotonic() + duration
+        while not stop:
+            for item in transport.drain():
+                observer.handle(item)
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+            if os.getppid() != parent:
+                log.warning("observer: parent process %d is gone; stopping", parent)
+                break
+            time.sleep(POLL_S)
+        for item in transport.drain():
+            observer.handle(item)
+    finally:
+        if transport is not None:
+            transport.close()
+        observer.close()
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    return observer
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m mesh_sim.observer",
+        description="Ground station: log a skymesh fleet's telemetry, beliefs and truth to Rerun.",
+    )
+    p.add_argument("--fleet", required=True, help="fleet name (the key space skymesh/<fleet>/...)")
+    p.add_argument("--connect", action="append", metavar="ENDPOINT",
+                   help="Zenoh router endpoint, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    p.add_argument("--zenoh-config", metavar="FILE", help="a Zenoh JSON5 config file (instead of --connect)")
+    p.add_argument("--save", metavar="PATH", help="write the recording to this .rrd file")
+    p.add_argument("--connect-viewer", metavar="URL", help="stream to a Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
+    p.add_argument("--spawn", action="store_true", help="start a live Rerun viewer (needs a display)")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of wall clock")
+    p.add_argument("--recording-id", help="Rerun recording id (default: the fleet name)")
+    p.add_argument("--application-id", default="skymesh", help="Rerun application id (default: skymesh)")
+    p.add_argument("--parent-pid", type=int, help="exit when this process is no longer our parent (default: the "
+                   "parent at start)")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    if not (args.save or args.connect_viewer or args.spawn):
+        print("observer: nothing to do: give --save, --connect-viewer or --spawn", file=sys.stderr)
+        return 2
+    try:
+        obs = run_observer(args.fleet, args.connect, args.zenoh_config, args.save, args.connect_viewer, args.spawn,
+                           args.duration, recording_id=args.recording_id, application_id=args.application_id,
+                           parent_pid=args.parent_pid)
+    except ValueError as err:
+        print(f"observer: {err}", file=sys.stderr)
+        return 2
+    except zenoh.ZError as err:  # e.g. no router at the endpoint
+        print(f"observer: cannot open the Zenoh session: {err}", file=sys.stderr)
+        return 1
+    rejected = ", ".join(f"{r}={n}" for r, n in sorted(obs.rejected.items())) or "none"
+    log.info("observer: %d messages logged; rejected: %s%s", obs.accepted, rejected,
+             f"; saved {args.save}" if args.save else "")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
