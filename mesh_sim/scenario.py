@@ -46,10 +46,15 @@ def resolve(name_or_path: str) -> Path:
 
 
 def load(name_or_path: str, **overrides) -> Scenario:
-    """Load and validate a scenario; ``overrides`` replace top-level agent settings (e.g. agents=8)."""
+    """Load and validate a scenario. ``overrides`` replace top-level settings (``agents=8``) or merge into
+    a section (``tracking={"policy": "ci"}`` changes only the policy)."""
     path = resolve(name_or_path)
     raw = read_scenario_file(path)
-    raw.update({k: v for k, v in overrides.items() if v is not None})
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(raw.get(key), dict):
+            raw[key] = {**raw[key], **value}
+        elif value is not None:
+            raw[key] = value
     try:
         agent = AgentScenario.from_dict(raw)
         targets = targets_from_config(raw.get("targets", []), terrain_from_config(agent.terrain))

@@ -1,0 +1,151 @@
+"""The ``skymesh`` command line.
+
+* ``skymesh bench NAME [--quick] [--json PATH]`` — run a benchmark of :data:`mesh_sim.bench.BENCHMARKS`
+  and print its tables (optionally writing the result as JSON);
+* ``skymesh bench --list`` — list the benchmarks;
+* ``skymesh run [--scenario NAME|FILE] [--agents N] [--duration S] [--speed X] [--seed K] [--out DIR]
+  [--policy P] [--rerun save|spawn|connect:URL|off]`` — a team of agent processes over Zenoh
+  (``mesh_sim.launcher``); with no arguments, the default scenario;
+* ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
+* ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``).
+
+Exit codes: 0 success, 1 a run that failed (a child died), 2 usage error (unknown benchmark or
+scenario, bad settings), 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from mesh_sim.bench import BENCHMARKS
+from mesh_sim.bench.common import make_console, write_json
+
+EXIT_USAGE = 2
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="skymesh", description="skymesh: decentralized cooperative perception for teams of UAVs."
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    bench = commands.add_parser("bench", help="run a benchmark and print its table", description="Run a benchmark.")
+    bench.add_argument("name", nargs="?", help="the benchmark to run (see --list)")
+    bench.add_argument("--list", action="store_true", help="list the available benchmarks and exit")
+    bench.add_argument("--quick", action="store_true", help="fewer, shorter repeats: seconds instead of minutes")
+    bench.add_argument("--json", metavar="PATH", type=Path, help="also write the result as JSON to PATH")
+    bench.add_argument("--repeats", type=_positive_int, help=argparse.SUPPRESS)  # tests: make --quick quicker
+
+    for name, text in (("run", "run a team of agents on a scenario"), ("demo", "run the default scenario")):
+        run = commands.add_parser(name, help=text, description=text)
+        run.add_argument("--scenario", default="default", help="a shipped scenario name or a TOML file")
+        run.add_argument("--agents", type=_positive_int, help="number of agents (overrides the scenario)")
+        run.add_argument("--duration", type=float, help="simulation seconds (overrides the scenario)")
+        run.add_argument("--speed", type=float, default=1.0, help="simulation seconds per wall second")
+        run.add_argument("--seed", type=int, help="random seed (overrides the scenario)")
+        run.add_argument("--policy", choices=["naive", "exact", "ci", "hybrid"], help="fusion policy")
+        run.add_argument("--out", type=Path, default=Path("runs"), help="where run folders go (default: runs)")
+        run.add_argument("--rerun", default="save", help="save (default), spawn, connect:URL or off")
+
+    view = commands.add_parser("view", help="the ground station: log a fleet to Rerun",
+                               description="Subscribe to a fleet on Zenoh and log it to Rerun.")
+    view.add_argument("--fleet", required=True)
+    view.add_argument("--connect", action="append", default=[], help="Zenoh router endpoint")
+    view.add_argument("--zenoh-config", help="a Zenoh JSON5 config file")
+    view.add_argument("--save", help="write the recording to this .rrd file")
+    view.add_argument("--connect-viewer", help="stream to a Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
+    view.add_argument("--duration", type=float, help="stop after this many seconds")
+    return parser
+
+
+def _known() -> str:
+    return ", ".join(sorted(BENCHMARKS))
+
+
+def _bench(args) -> int:
+    console = make_console()
+    if args.list:
+        for name, bench in sorted(BENCHMARKS.items()):
+            console.print(f"[bold]{name}[/bold]  {bench.description}", highlight=False)
+        return 0
+    if args.name is None:
+        print(f"skymesh bench: name a benchmark; known benchmarks: {_known()}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.name not in BENCHMARKS:
+        print(
+            f"skymesh bench: unknown benchmark {args.name!r}; known benchmarks: {_known()} "
+            "(`skymesh bench --list` describes them)",
+            file=sys.stderr,
+        )
+        return EXIT_USAGE
+    bench = BENCHMARKS[args.name]
+    result = bench.run(quick=args.quick, repeats=args.repeats)
+    bench.report(result, console)
+    if args.json is not None:
+        console.print(f"JSON written to {write_json(args.json, result)}", highlight=False)
+    return 0
+
+
+def _run(args) -> int:
+    from mesh_sim.launcher import Launcher, new_run_dir
+    from mesh_sim.results import summary_table
+    from mesh_sim.scenario import load
+
+    console = make_console()
+    overrides = {"agents": args.agents, "duration": args.duration, "seed": args.seed}
+    if args.policy:
+        overrides["tracking"] = {"policy": args.policy}
+    try:
+        scenario = load(args.scenario, **overrides)
+        launcher = Launcher(scenario, new_run_dir(args.out, scenario.name), speed=args.speed, rerun=args.rerun,
+                            console=console)
+    except (ValueError, OSError) as err:
+        print(f"skymesh run: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    outcome = launcher.run()
+    console.print(summary_table(outcome.metrics))
+    console.print(f"Results: {outcome.run_dir}  (metrics.json, plots/, logs/"
+                  + (", recording.rrd: open with `rerun recording.rrd`" if args.rerun == "save" else "") + ")",
+                  highlight=False)
+    if outcome.status == "interrupted":
+        return 130
+    return 0 if outcome.status == "completed" else 1
+
+
+def _view(args) -> int:
+    from mesh_sim.observer import main as observer_main
+
+    argv = ["--fleet", args.fleet]
+    for endpoint in args.connect:
+        argv += ["--connect", endpoint]
+    for flag, value in (("--zenoh-config", args.zenoh_config), ("--save", args.save),
+                        ("--connect-viewer", args.connect_viewer), ("--duration", args.duration)):
+        if value is not None:
+            argv += [flag, str(value)]
+    if args.save is None and args.connect_viewer is None:
+        argv.append("--spawn")
+    return observer_main(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``skymesh`` console script; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    if args.command == "bench":
+        return _bench(args)
+    if args.command == "view":
+        return _view(args)
+    return _run(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,148 @@
+"""Live runs: real agent processes over a real Zenoh router, started and stopped by the launcher.
+
+Every test checks that no process it caused is left running (by PID, never by name).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import psutil
+import pytest
+
+from mesh_sim.launcher import Launcher, new_run_dir
+from mesh_sim.scenario import load
+
+
+def _assert_all_gone(pids, timeout: float = 15.0) -> None:
+    deadline = time.time() + timeout
+    alive = set(pids)
+    while alive and time.time() < deadline:
+        alive = {p for p in alive if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE}
+        time.sleep(0.1)
+    assert not alive, f"processes left running: {sorted(alive)}"
+
+
+@pytest.fixture(scope="module")
+def completed_run(tmp_path_factory):
+    """One 4-agent run of the default scenario at twice real time (shared by the checks below)."""
+    scenario = load("default", duration=30.0, agents=4)
+    run_dir = new_run_dir(tmp_path_factory.mktemp("runs"), scenario.name)
+    outcome = Launcher(scenario, run_dir, speed=2.0, rerun="save").run()
+    return outcome
+
+
+def test_live_run_completes_and_every_agent_tracks_every_target(completed_run):
+    metrics = completed_run.metrics
+    assert completed_run.status == "completed", completed_run.status
+    assert len(metrics["agents"]) == 4
+    for agent in metrics["agents"]:
+        assert agent["steps"] > 100
+        assert {t["target"] for t in agent["targets"]} == {"parked", "walker", "car"}
+        for target in agent["targets"]:
+            assert target["rmse"] is not None and target["rmse"] < 10.0, (agent["id"], target)
+            assert target["anees"] < 3.0, (agent["id"], target)
+    assert metrics["oracle"]["rmse"] is not None
+    assert metrics["fleet"]["rmse_ratio_to_oracle"] < 3.0
+
+
+def test_live_run_bytes_flow_between_every_pair(completed_run):
+    agents = completed_run.metrics["agents"]
+    names = {a["id"] for a in agents}
+    for agent in agents:
+        heard = agent["bytes_rx_by_peer"]
+        for peer in names - {agent["id"]}:
+            assert heard.get(peer, {}).get("track", 0) > 0, f"{agent['id']} never heard {peer}'s tracks"
+            assert heard[peer].get("telemetry", 0) > 0
+
+
+def test_live_run_writes_the_run_folder(completed_run):
+    run_dir = completed_run.run_dir
+    on_disk = json.loads((run_dir / "metrics.json").read_text())
+    assert on_disk["status"] == "completed"
+    assert (run_dir / "recording.rrd").stat().st_size > 10_000
+    assert (run_dir / "plots" / "rmse.png").stat().st_size > 1000
+    for key in ("id", "pid", "steps", "deadline_misses", "bytes_tx", "bytes_rx", "msgs_rejected", "targets"):
+        assert key in on_disk["agents"][0]
+    for key in ("rmse", "anees", "rmse_ratio_to_oracle", "bytes_per_agent_per_s"):
+        assert key in on_disk["fleet"]
+
+
+def test_live_run_leaves_no_process(completed_run):
+    _assert_all_gone(completed_run.pids.values())
+
+
+def test_killing_an_agent_stops_the_whole_run(tmp_path):
+    """Bad event: an agent dies (SIGKILL) mid-run. The launcher must notice, stop everything, and still
+    write the metrics it has."""
+    scenario = load("default", duration=60.0, agents=4)
+    launcher = Launcher(scenario, new_run_dir(tmp_path, "kill"), speed=1.0, rerun="off")
+
+    def kill_one():
+        deadline = time.time() + 30
+        while time.time() < deadline and len(launcher.children) < 5:
+            time.sleep(0.1)
+        time.sleep(4.0)
+        victim = next(c for c in launcher.children if c.name == "uav1")
+        os.kill(victim.process.pid, signal.SIGKILL)
+
+    killer = threading.Thread(target=kill_one, daemon=True)
+    killer.start()
+    started = time.time()
+    outcome = launcher.run()
+    killer.join(timeout=5)
+    assert outcome.status.startswith("failed: uav1"), outcome.status
+    assert time.time() - started < 40, "the launcher should stop long before the scenario's 60 s"
+    _assert_all_gone(outcome.pids.values())
+    died = next(a for a in outcome.metrics["agents"] if a["id"] == "uav1")
+    assert died["status"].startswith("died")
+    assert (outcome.run_dir / "metrics.json").exists()
+
+
+def test_children_exit_when_the_launcher_is_killed(tmp_path):
+    """Bad event: the launcher itself is SIGKILLed. Its children must not become orphans."""
+    cmd = [sys.executable, "-m", "mesh_sim.cli", "run", "--agents", "3", "--duration", "60", "--rerun", "off",
+           "--out", str(tmp_path)]
+    launcher = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.time() + 30
+        children = []
+        while time.time() < deadline and len(children) < 4:
+            children = psutil.Process(launcher.pid).children()
+            time.sleep(0.2)
+        assert len(children) >= 4, "the launcher did not start its children"
+        time.sleep(3.0)
+        launcher.kill()
+        launcher.wait()
+        _assert_all_gone([c.pid for c in children], timeout=20)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+        for child in psutil.Process().children(recursive=True):
+            child.kill()
+
+
+def test_unknown_scenario_is_a_clear_error(tmp_path):
+    """Bad input: a scenario name that does not exist."""
+    out = subprocess.run([sys.executable, "-m", "mesh_sim.cli", "run", "--scenario", "no-such-scenario",
+                          "--out", str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    assert "no scenario 'no-such-scenario'" in out.stderr
+    assert "default" in out.stderr  # it lists the shipped ones
+
+
+def test_scenario_with_a_typo_is_a_clear_error(tmp_path):
+    """Bad input: a scenario file with an unknown setting (a typo must not be silently ignored)."""
+    bad = tmp_path / "typo.toml"
+    bad.write_text(Path(load("default").path).read_text().replace("rate_hz", "rate_hertz"))
+    out = subprocess.run([sys.executable, "-m", "mesh_sim.cli", "run", "--scenario", str(bad),
+                          "--out", str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    assert "rate_hertz" in out.stderr
