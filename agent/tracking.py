@@ -1,8 +1,17 @@
 """Multi-target tracking from bearings, fused with peers through channel filters.
 
-Each target is a trajectory belief (``fusion.trajectory``: constant velocity, Merino (3.58)-(3.59), over
-a sliding window on the agent's time grid), so that exact channel-filter fusion works for moving
-targets (Merino (3.41)-(3.42)).
+Each target is a trajectory belief (``fusion.trajectory``, a sliding window on the agent's time grid),
+so that exact channel-filter fusion works for moving targets (Merino (3.41)-(3.42)). The default motion
+model is ``DampedVelocity`` (integrated Ornstein–Uhlenbeck velocity): its stationary speed distribution
+is part of every node's prior, so no node adds a velocity prior of its own. With the constant-velocity
+model (Merino (3.58)-(3.59)) a new track needs a velocity pseudo-prior, which two agents initiating the
+same target both bring (after exact fusion that weak prior counts twice: a small, documented
+overconfidence in early velocity).
+
+Measurements are used either as bearings (extended information update, Merino (3.52)) or, with
+``measurement = "position"``, as geolocated positions: the ray cast onto the terrain with an
+unscented-transform covariance (Merino (3.60)-(3.61)). The latter is linear in the state, so on a tree
+decentralized fusion equals the centralized filter exactly.
 
 * **Scan-to-track** (Merino (3.64)): the predicted bearing of every track is compared with every
   detection by ``d^2 = nu^T S^-1 nu``, ``S = H P H^T + R``, gated at ``d^2 <= 9`` (Merino's threshold);
@@ -22,10 +31,6 @@ targets (Merino (3.41)-(3.42)).
   twice (e.g. initiated by two agents before they heard each other); they are merged by covariance
   intersection, labels move to the surviving track and its channels fall back to intersection (its
   common information with each peer is no longer known).
-
-The velocity prior of a new track is local pseudo-information: two agents that both initiate the same
-target each bring one, so after exact fusion that weak prior counts twice (a documented, small
-overconfidence in early velocity; it is dominated by bearings within a few steps).
 """
 
 from __future__ import annotations
@@ -39,7 +44,7 @@ from agent.sensing import Bearing
 from fusion.channel_filter import ChannelFilter, Received
 from fusion.gaussian import Gaussian, UninformativeBeliefError
 from fusion.measurement import Bearing3D, PositionMeasurement
-from fusion.motion import ConstantVelocity
+from fusion.motion import ConstantVelocity, DampedVelocity
 from fusion.trajectory import Trajectory, TrajectoryModel, intersect_on_newest
 from perception.geolocation import geolocate
 
@@ -54,18 +59,21 @@ class TrackerConfig:
     confirm_hits: int = 3  # chosen here
     confirm_within: int = 8  # steps a tentative track has to reach confirm_hits; chosen here
     max_position_std: float = 40.0  # [m] delete a track whose position is this uncertain; chosen here
-    q: float = 3.0  # target acceleration spectral density [m^2/s^3]; chosen here to cover the figure-8's 2.6 m/s^2
-    vertical_q: float = 0.01  # ground targets hardly accelerate vertically [m^2/s^3]; chosen here
+    motion: str = "damped"  # "damped" (integrated OU velocity) or "constant_velocity"
+    tau: float = 10.0  # damped: velocity correlation time [s]; chosen here
+    q: float = 3.0  # constant velocity: acceleration spectral density [m^2/s^3]; covers the figure-8's 2.6 m/s^2
+    vertical_q: float = 0.01  # constant velocity: ground targets hardly accelerate vertically; chosen here
+    measurement: str = "bearing"  # "bearing" (EIF, Merino (3.52)) or "position" (geolocated, (3.60)-(3.61))
     stale_after: float = 6.0  # s since anyone measured a track before it is deleted; chosen here
     window: int = 8  # states in a trajectory belief; chosen here
-    speed_std: float = 5.0  # horizontal velocity prior of a new track [m/s]; chosen here
+    speed_std: float = 5.0  # horizontal speed standard deviation of targets [m/s]; chosen here
     vertical_speed_std: float = 0.3  # ground targets hardly climb [m/s]; chosen here
     terrain_sigma: float = 2.0  # DEM error [m]; chosen here
     sensor_sigma: float = 0.5  # camera position error [m] (GPS); chosen here
     policy: str = "hybrid"
 
     def __post_init__(self):
-        positive = ("gate", "track_gate", "max_position_std", "q", "vertical_q", "stale_after", "speed_std",
+        positive = ("gate", "track_gate", "max_position_std", "tau", "q", "vertical_q", "stale_after", "speed_std",
                     "vertical_speed_std")
         for name in positive:
             value = getattr(self, name)
@@ -73,6 +81,10 @@ class TrackerConfig:
                 raise ValueError(f"tracking.{name} must be positive, got {value!r}")
         if self.confirm_hits < 1 or self.confirm_within < self.confirm_hits or self.window < 2:
             raise ValueError("tracking: need confirm_within >= confirm_hits >= 1 and window >= 2")
+        if self.motion not in ("damped", "constant_velocity"):
+            raise ValueError(f"tracking.motion must be damped or constant_velocity, got {self.motion!r}")
+        if self.measurement not in ("bearing", "position"):
+            raise ValueError(f"tracking.measurement must be bearing or position, got {self.measurement!r}")
         if self.policy not in ("naive", "exact", "ci", "hybrid"):
             raise ValueError(f"tracking.policy must be naive, exact, ci or hybrid, got {self.policy!r}")
 
@@ -104,7 +116,11 @@ class Tracker:
     def __init__(self, config: TrackerConfig, step: float, terrain):
         self.config = config
         self.terrain = terrain
-        self.model = TrajectoryModel(ConstantVelocity(3, config.q, config.vertical_q), step, config.window)
+        if config.motion == "damped":
+            motion = DampedVelocity(3, config.speed_std, config.tau, config.vertical_speed_std)
+        else:
+            motion = ConstantVelocity(3, config.q, config.vertical_q)
+        self.model = TrajectoryModel(motion, step, config.window)
         self.epoch = 0
         self.tracks: dict[int, Track] = {}
         self.labels: dict[tuple[str, int], int] = {}  # (peer, remote track id) -> local track id
@@ -146,8 +162,10 @@ class Tracker:
         for b_index, track_id in pairs:
             track = self.tracks[track_id]
             bearing = bearings[b_index]
-            model = Bearing3D(STATE_DIM, bearing.sensor, bearing.R)
-            track.belief = track.belief.eif_update(model, bearing.azel, self._offset(bearing))
+            updated = self._measure(track.belief, bearing)
+            if updated is None:
+                continue
+            track.belief = updated
             track.hits += 1
             track.last_measured = max(track.last_measured, bearing.t)
             track.confirmed = track.confirmed or track.hits >= self.config.confirm_hits
@@ -163,6 +181,22 @@ class Tracker:
             else:
                 counts["unused"] += 1
         return counts
+
+    def _measure(self, belief: Trajectory, bearing: Bearing) -> Trajectory | None:
+        """Apply one detection to a belief, as a bearing or as a geolocated position (``None``: the ray
+        misses the terrain, so a position cannot be formed)."""
+        offset = self._offset(bearing)
+        if self.config.measurement == "bearing":
+            return belief.eif_update(Bearing3D(STATE_DIM, bearing.sensor, bearing.R), bearing.azel, offset)
+        located = self._geolocate(bearing)
+        if located is None:
+            return None
+        where = PositionMeasurement(STATE_DIM, located[1])
+        return belief.update(where.H, where.R_inv, located[0], offset)
+
+    def _geolocate(self, bearing: Bearing):
+        return geolocate(bearing.sensor, bearing.azel, bearing.R, self.terrain,
+                         sensor_sigma=self.config.sensor_sigma, terrain_sigma=self.config.terrain_sigma)
 
     def _offset(self, bearing: Bearing) -> int:
         offset = self.epoch - self.model.epoch_of(bearing.t)
@@ -206,21 +240,19 @@ class Tracker:
         return bool(np.any(cost <= self.config.gate))
 
     def _initiate(self, bearing: Bearing) -> Track | None:
-        located = geolocate(
-            bearing.sensor, bearing.azel, bearing.R, self.terrain,
-            sensor_sigma=self.config.sensor_sigma, terrain_sigma=self.config.terrain_sigma,
-        )
+        """A new track at the ground point of the ray, with its unscented-transform covariance."""
+        located = self._geolocate(bearing)
         if located is None:
             return None
-        position, cov = located
         c = self.config
         belief = Trajectory.prior(self.model, self.epoch)
         offset = self._offset(bearing)
-        where = PositionMeasurement(STATE_DIM, cov)
-        belief = belief.update(where.H, where.R_inv, position, offset)
-        speed_cov = np.diag([c.speed_std**2, c.speed_std**2, c.vertical_speed_std**2])
-        H_v = np.hstack([np.zeros((3, 3)), np.eye(3)])
-        belief = belief.update(H_v, np.linalg.inv(speed_cov), np.zeros(3), offset)
+        where = PositionMeasurement(STATE_DIM, located[1])
+        belief = belief.update(where.H, where.R_inv, located[0], offset)
+        if c.motion == "constant_velocity":  # no stationary velocity in the prior: add a local pseudo-prior
+            speed_cov = np.diag([c.speed_std**2, c.speed_std**2, c.vertical_speed_std**2])
+            H_v = np.hstack([np.zeros((3, 3)), np.eye(3)])
+            belief = belief.update(H_v, np.linalg.inv(speed_cov), np.zeros(3), offset)
         track = self._new_track(belief)
         track.truth_id = bearing.truth_id
         track.last_measured = bearing.t

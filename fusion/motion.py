@@ -8,6 +8,11 @@ e.g. ``(x, y, z, vx, vy, vz)`` for a 3-D constant-velocity target.
 * :class:`Singer` — exponentially correlated acceleration (Singer, 1970), discretised exactly with
   Van Loan's matrix exponential (Van Loan, 1978), which also serves as the independent check of the
   constant-velocity closed form in the tests.
+* :class:`DampedVelocity` — integrated Ornstein–Uhlenbeck velocity: a target whose speed stays bounded
+  in distribution. Its stationary velocity distribution is a prior every node shares by construction.
+
+A model may define ``stationary_information()``: the information matrix of its stationary distribution
+on one state (zero along directions, such as position, that have none). Trajectory priors use it.
 """
 
 from __future__ import annotations
@@ -116,6 +121,67 @@ class Singer:
         A, Qc = self._continuous()
         _, Q1 = van_loan(A, Qc, dt)
         return np.kron(Q1, np.eye(self.spatial_dims))
+
+
+@dataclass(frozen=True)
+class DampedVelocity:
+    """Integrated Ornstein–Uhlenbeck velocity per axis: ``dp = v dt``, ``dv = -v / tau dt + s dW``.
+
+    The velocity is stationary with variance ``speed_std^2`` (so ``s^2 = 2 speed_std^2 / tau``); the
+    position is a random walk with no stationary distribution. ``vertical_speed_std`` (last axis, "down"
+    in NED) lets ground targets hardly climb. Discretised exactly with Van Loan's method. Defaults are
+    chosen here: ground vehicles up to ~10 m/s, changing velocity over ~10 s."""
+
+    spatial_dims: int = 3
+    speed_std: float = 5.0  # stationary horizontal velocity standard deviation [m/s]
+    tau: float = 10.0  # velocity correlation time [s]
+    vertical_speed_std: float | None = None
+
+    def __post_init__(self):
+        _check_positive(self.spatial_dims, "spatial_dims")
+        for name in ("speed_std", "tau", "vertical_speed_std"):
+            value = getattr(self, name)
+            if value is not None and not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value}")
+
+    @property
+    def dim(self) -> int:
+        return 2 * self.spatial_dims
+
+    def _axis_stds(self) -> np.ndarray:
+        stds = np.full(self.spatial_dims, float(self.speed_std))
+        if self.vertical_speed_std is not None:
+            stds[-1] = self.vertical_speed_std
+        return stds
+
+    def _discrete(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        _check_dt(dt)
+        A = np.array([[0.0, 1.0], [0.0, -1.0 / self.tau]])
+        F = np.zeros((self.dim, self.dim))
+        Q = np.zeros((self.dim, self.dim))
+        d = self.spatial_dims
+        for axis, std in enumerate(self._axis_stds()):
+            F1, Q1 = van_loan(A, np.diag([0.0, 2.0 * std**2 / self.tau]), dt)
+            idx = [axis, d + axis]
+            F[np.ix_(idx, idx)] = F1
+            Q[np.ix_(idx, idx)] = Q1
+        return F, Q
+
+    def transition(self, dt: float) -> np.ndarray:
+        return self._discrete(dt)[0]
+
+    def inverse_transition(self, dt: float) -> np.ndarray:
+        return np.linalg.inv(self.transition(dt))
+
+    def noise(self, dt: float) -> np.ndarray:
+        return self._discrete(dt)[1]
+
+    def stationary_information(self) -> np.ndarray:
+        """``diag(0 (positions), 1 / speed_std^2 (velocities))``: what every node knows before any data."""
+        d = self.spatial_dims
+        info = np.zeros((self.dim, self.dim))
+        info[d:, d:] = np.diag(1.0 / self._axis_stds() ** 2)
+        return info
 
 
 def van_loan(A: np.ndarray, Qc: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

@@ -11,11 +11,12 @@ States live on a uniform time grid ``t_k = k * step``; a belief's ``epoch`` is t
 newest state. A belief always spans exactly ``window`` states (oldest first). The oldest state is
 marginalised out with the Schur complement as the window slides (Merino (3.31)-(3.32)).
 
-The prior of every trajectory is the zero-information *chain*: no information on any state, only
-the process factors between consecutive states. Sliding the window maps that chain onto itself
-(marginalising ``x_0`` from ``F^T Q^-1 F`` leaves nothing on ``x_1``), so two nodes that created a
-track at different times still share exactly the same prior — the common information a channel filter
-starts from.
+The prior of every trajectory is the *chain*: the process factors between consecutive states plus,
+on the oldest state, the motion model's stationary information (``stationary_information()``; zero for
+a constant-velocity model, the stationary velocity distribution for ``DampedVelocity``). Sliding the
+window maps that chain onto itself — marginalising ``x_0`` leaves on ``x_1`` exactly the stationary
+information again (nothing for constant velocity) — so two nodes that created a track at different
+times still share exactly the same prior: the common information a channel filter starts from.
 
 Measurements may update any state inside the window (``offset`` steps before the newest), so late
 data are applied at the time they were taken, not as if current.
@@ -41,6 +42,7 @@ class TrajectoryModel:
 
     F: np.ndarray = field(init=False, repr=False, compare=False)
     factor: np.ndarray = field(init=False, repr=False, compare=False)
+    stationary: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         if not (np.isfinite(self.step) and self.step > 0):
@@ -58,6 +60,8 @@ class TrajectoryModel:
         lower = np.hstack([-Q_inv @ F, Q_inv])
         object.__setattr__(self, "F", F)
         object.__setattr__(self, "factor", np.vstack([upper, lower]))
+        stationary = getattr(self.motion, "stationary_information", None)
+        object.__setattr__(self, "stationary", np.zeros_like(F) if stationary is None else stationary())
 
     @property
     def state_dim(self) -> int:
@@ -85,9 +89,11 @@ class Trajectory:
 
     @classmethod
     def prior(cls, model: TrajectoryModel, epoch: int) -> Trajectory:
-        """The zero-information chain: process factors only (see the module docstring)."""
+        """The prior chain: the stationary information on the oldest state and the process factors
+        (see the module docstring)."""
         n, L = model.state_dim, model.window
         Y = np.zeros((n * L, n * L))
+        Y[:n, :n] = model.stationary
         for k in range(L - 1):
             Y[k * n : (k + 2) * n, k * n : (k + 2) * n] += model.factor
         return cls(np.zeros(n * L), Y, int(epoch), model)
