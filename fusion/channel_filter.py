@@ -27,8 +27,15 @@ Policies: ``exact`` (channel filters; optimal on trees), ``ci`` (covariance inte
 ``hybrid`` (exact on edges the caller knows to be tree edges and whose common information is
 synchronised, intersection otherwise) and ``naive`` (treat every message as independent evidence —
 for comparison only: it double-counts). Whenever the exact result would not be positive semi-definite,
-or the acknowledged message is no longer in the history, the channel falls back to intersection and
-stays there (it is *desynchronised*) until :meth:`ChannelFilter.reset` starts it afresh.
+the acknowledged message is no longer in the history, or (``hybrid``) the link may lie on a loop, the
+channel falls back to intersection and is *desynchronised*.
+
+**Outages and loops.** A lost link does not desynchronise anything: acknowledgements keep both parts
+valid, and when the link comes back exact fusion simply resumes. A channel desynchronised by a loop
+stays on intersection even after the loop breaks. Re-synchronising it would need both ends to agree on
+one common baseline: taking the neighbour's next message as the baseline on each side independently was
+measured overconfident (each side's intersection shows up as "new" information in the other's
+baseline), so it is not done; :meth:`ChannelFilter.reset` restarts a channel whose neighbour restarted.
 """
 
 from __future__ import annotations

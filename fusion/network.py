@@ -57,20 +57,25 @@ class FilterNetwork:
         seed: int = 0,
         intersect: Callable | None = None,
     ):
-        self.edges = sorted({tuple(sorted(e)) for e in edges})
-        if any(u == v or not (0 <= u < n and 0 <= v < n) for u, v in self.edges):
-            raise ValueError(f"edges must join two distinct nodes among 0..{n - 1}")
         if not 0.0 <= loss <= 1.0:
             raise ValueError(f"loss must be a probability, got {loss}")
         self.n = n
         self.loss = loss
         self.rng = np.random.default_rng(seed)
-        self.tree_edges = bridges(n, self.edges)
+        self.set_edges(edges)
         self.beliefs = [prior] * n
         self.filters = [ChannelFilter(prior, policy, intersect) for _ in range(n)]
         self._seq = [0] * n
         self._last_received: list[dict[int, int]] = [{} for _ in range(n)]
         self.methods: Counter = Counter()
+
+    def set_edges(self, edges: Iterable[tuple[int, int]]) -> None:
+        """Change the topology (links appear, disappear, loops form or break)."""
+        edges = sorted({tuple(sorted(e)) for e in edges})
+        if any(u == v or not (0 <= u < self.n and 0 <= v < self.n) for u, v in edges):
+            raise ValueError(f"edges must join two distinct nodes among 0..{self.n - 1}")
+        self.edges = edges
+        self.tree_edges = bridges(self.n, edges)
 
     def neighbours(self, i: int) -> list[int]:
         return [v if u == i else u for u, v in self.edges if i in (u, v)]
