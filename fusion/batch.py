@@ -32,6 +32,7 @@ from fusion.measurement import wrap_angle
 
 #: Smallest squared horizontal distance at which a bearing is defined (same value as fusion.measurement).
 _MIN_RHO2 = 1e-12
+_TINY = np.finfo(float).tiny  # the smallest normal float64
 
 
 class GaussianBatch:
@@ -114,7 +115,12 @@ class GaussianBatch:
         (3.13), solved for all tracks with one batched ``np.linalg.solve``. ``F``, ``Q`` and ``F_inv``
         are (n, n) or (N, n, n); ``F_inv`` defaults to ``inv(F)``. Like the per-track prediction, the
         model matrices are checked for shape and finiteness only (``Q``'s definiteness is the model's
-        business, checked where the model is built)."""
+        business, checked where the model is built).
+
+        Entries smaller in magnitude than the smallest normal float (about 2.2e-308) are set to zero.
+        They arise when the coupling between independent axes decays over many predictions; they carry
+        no information, but arithmetic on subnormal numbers is slow (measured: 100 constant-velocity
+        tracks predicted and updated 4000 times became 3x slower without this)."""
         N, n = self.y.shape
         F = self._model_matrix(F, "transition matrix F", (n, n))
         Q = self._model_matrix(Q, "process noise Q", (n, n))
@@ -128,7 +134,11 @@ class GaussianBatch:
         rhs[..., n] = (F_inv_T @ self.y[..., None])[..., 0]
         sol = np.linalg.solve(gain, rhs)
         Y = sol[..., :n]
-        return GaussianBatch._trusted(sol[..., n], 0.5 * (Y + np.swapaxes(Y, -1, -2)))
+        Y = 0.5 * (Y + np.swapaxes(Y, -1, -2))
+        y = sol[..., n]
+        _flush_subnormals(Y)
+        _flush_subnormals(y)
+        return GaussianBatch._trusted(y, Y)
 
     def update(self, H, R_inv, z) -> GaussianBatch:
         """Linear measurement update of every track (Merino (3.17)-(3.18)):
@@ -258,6 +268,10 @@ class GaussianBatch:
         if z.shape != (len(self), m):
             raise ValueError(f"measurements z must have shape (N, {m}) = {(len(self), m)}, got {z.shape}")
         return _check_finite(z, "measurements z")
+
+
+def _flush_subnormals(arr: np.ndarray) -> None:
+    arr[np.abs(arr) < _TINY] = 0.0
 
 
 def _check_finite(arr: np.ndarray, name: str) -> np.ndarray:

@@ -1,1 +1,47 @@
-"""mesh_sim/bench"""
+"""Benchmarks run by ``skymesh bench NAME`` (see :mod:`mesh_sim.cli`).
+
+To add a benchmark, write a module in this package that defines
+
+* ``run(quick: bool = False, repeats: int | None = None) -> dict`` — a JSON-serialisable result with at
+  least ``"benchmark"`` (its name), ``"rows"`` (one dict per measurement) and ``"goals"``; ``quick``
+  must finish in well under a minute, ``repeats`` (a hidden CLI flag) overrides the number of timed
+  repeats so that tests can make it quicker still (:class:`mesh_sim.bench.common.Settings` does this);
+* ``report(result: dict, console=None) -> None`` — print the tables for a result,
+
+and add a :class:`Benchmark` entry to :data:`BENCHMARKS`. Modules are imported only when their
+benchmark runs, so ``skymesh bench --list`` stays fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    name: str
+    module: str  # dotted path of the module that defines run() and report()
+    description: str
+
+    def load(self):
+        return importlib.import_module(self.module)
+
+    def run(self, quick: bool = False, repeats: int | None = None) -> dict:
+        return self.load().run(quick=quick, repeats=repeats)
+
+    def report(self, result: dict, console=None) -> None:
+        self.load().report(result, console)
+
+
+BENCHMARKS: dict[str, Benchmark] = {
+    b.name: b
+    for b in [
+        Benchmark(
+            "fusion-ops",
+            "mesh_sim.bench.fusion_ops",
+            "µs per fusion operation (IF, bearing EIF, CI, fast CI, channel filter) vs bare numpy, filterpy and "
+            "Stone Soup; GaussianBatch vs per-track loops over 100 tracks",
+        ),
+    ]
+}

@@ -112,6 +112,19 @@ def test_predict_zero_information_and_static_model():
     _assert_batch_equals(static, [g])
 
 
+def test_predict_flushes_subnormal_entries(rng):
+    """Cross-axis couplings that decay below the smallest normal float become exact zeros (speed)."""
+    model = ConstantVelocity(spatial_dims=2, q=0.1)
+    g = Gaussian.from_moments(rng.normal(size=4), np.diag([4.0, 9.0, 1.0, 2.0]))
+    Y = g.Y.copy()
+    Y[0, 1] = Y[1, 0] = 1e-310  # x-y coupling, subnormal
+    tiny_coupled = Gaussian(g.y, Y)
+    out = GaussianBatch.from_gaussians([tiny_coupled] * 3).predict(model.transition(1.0), model.noise(1.0))
+    tiny = np.finfo(float).tiny
+    assert not np.any((out.Y != 0) & (np.abs(out.Y) < tiny))
+    _assert_batch_equals(out, [tiny_coupled.predict(model.transition(1.0), model.noise(1.0))] * 3)
+
+
 @pytest.mark.parametrize("N", SIZES)
 @pytest.mark.parametrize("spatial_dims", [2, 3])
 def test_update_equals_information_filter(rng, N, spatial_dims):

@@ -1,0 +1,86 @@
+"""The ``skymesh bench`` command line: benchmark dispatch, JSON output, usage errors."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+
+from mesh_sim import cli
+from mesh_sim.bench import BENCHMARKS, fusion_ops
+
+
+def _skymesh(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "mesh_sim.cli", *args], capture_output=True, text=True, timeout=timeout, check=False
+    )
+
+
+def test_bench_fusion_ops_quick_writes_complete_json(tmp_path):
+    path = tmp_path / "out" / "fusion-ops.json"
+    proc = _skymesh("bench", "fusion-ops", "--quick", "--json", str(path), "--repeats", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "Single operations" in proc.stdout and "Batched" in proc.stdout
+    result = json.loads(path.read_text())
+    assert result["benchmark"] == "fusion-ops"
+    assert result["settings"]["quick"] is True
+
+    rows = result["rows"]
+    for row in rows:
+        for key in ("us_per_call", "us_per_track", "best_us"):
+            assert isinstance(row[key], float) and math.isfinite(row[key]) and row[key] > 0, (key, row)
+        assert row["max_rel_diff"] < 1e-4, row  # every implementation computed the same thing
+    impls = {}
+    for r in rows:
+        impls.setdefault((r["op"], r["n"]), set()).add(r["impl"])
+    for op in fusion_ops.OPS:
+        for n in fusion_ops.SIZES:
+            got = impls.get((op.key, n), set())
+            assert {op.reference, "numpy" if op.section == "single" else "skymesh-loop"} <= got, (op.key, n, got)
+    for n in fusion_ops.SIZES:  # the test extras install filterpy and Stone Soup
+        assert {"filterpy", "stonesoup", "stonesoup-info"} <= impls[("if_predict_update", n)]
+        assert {"filterpy", "stonesoup"} <= impls[("bearing_eif", n)]
+        assert "stonesoup-loop" in impls[("batch_if", n)] and "stonesoup-loop" in impls[("batch_bearing", n)]
+
+    goals = result["goals"]
+    assert set(goals) == {"single_op_vs_numpy", "batched_vs_stonesoup"}
+    for goal in goals.values():
+        assert isinstance(goal["pass"], bool) and goal["results"]
+        assert all(math.isfinite(r["ratio"]) and r["ratio"] > 0 for r in goal["results"])
+
+
+def test_unknown_benchmark_exits_2_and_lists_known_ones():
+    proc = _skymesh("bench", "no-such-bench")
+    assert proc.returncode == 2
+    assert "unknown benchmark 'no-such-bench'" in proc.stderr
+    assert "fusion-ops" in proc.stderr
+
+
+def test_bench_without_name_is_a_usage_error(capsys):
+    assert cli.main(["bench"]) == 2
+    assert "fusion-ops" in capsys.readouterr().err
+
+
+def test_bench_list(capsys):
+    assert cli.main(["bench", "--list"]) == 0
+    out = capsys.readouterr().out
+    for name in BENCHMARKS:
+        assert name in out
+
+
+def test_python_dash_m_mesh_sim():
+    proc = subprocess.run(
+        [sys.executable, "-m", "mesh_sim", "bench", "--list"], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "fusion-ops" in proc.stdout
+
+
+@pytest.mark.parametrize("argv", [["bench", "fusion-ops", "--repeats", "0"], ["frobnicate"]])
+def test_bad_arguments_exit_2(argv):
+    with pytest.raises(SystemExit) as excinfo:
+        cli.main(argv)
+    assert excinfo.value.code == 2
