@@ -65,15 +65,16 @@ def optimal_weights(matrices: Sequence[np.ndarray], objective: str = "det") -> n
     if len(matrices) == 1:
         return np.ones(1)
     if len(matrices) == 2:
+        value = _neg_logdet_value if objective == "det" else (lambda Y: _trace_of_inverse(Y)[0])
         Ya, Yb = matrices
         res = scipy.optimize.minimize_scalar(
-            lambda w: cost(w * Ya + (1.0 - w) * Yb)[0], bounds=(0.0, 1.0), method="bounded",
+            lambda w: value(w * Ya + (1.0 - w) * Yb), bounds=(0.0, 1.0), method="bounded",
             options={"xatol": 1e-6},
         )
         w = float(res.x)
         # The bounded search never evaluates the end points; they can be the optimum (e.g. one input
         # carries no information), so compare them explicitly.
-        candidates = [(cost(w * Ya + (1 - w) * Yb)[0], w), (cost(Ya)[0], 1.0), (cost(Yb)[0], 0.0)]
+        candidates = [(value(w * Ya + (1 - w) * Yb), w), (value(Ya), 1.0), (value(Yb), 0.0)]
         w = min(candidates)[1]
         return np.array([w, 1.0 - w])
     return _simplex_optimum(list(matrices), cost)
@@ -104,11 +105,15 @@ def _simplex_optimum(matrices: list[np.ndarray], cost) -> np.ndarray:
     return w if fun(w)[0] <= fun(start)[0] else start
 
 
-def _neg_logdet(Y: np.ndarray):
+def _neg_logdet_value(Y: np.ndarray) -> float:
     sign, logdet = np.linalg.slogdet(Y)
-    if sign <= 0:
-        return _SINGULAR_PENALTY, None
-    return -logdet, np.linalg.inv(Y)
+    return _SINGULAR_PENALTY if sign <= 0 else -float(logdet)
+
+
+def _neg_logdet(Y: np.ndarray):
+    """``-log det Y`` and ``Y^-1`` (the gradient of the many-input search needs the inverse)."""
+    value = _neg_logdet_value(Y)
+    return (value, None) if value >= _SINGULAR_PENALTY else (value, np.linalg.inv(Y))
 
 
 def _trace_of_inverse(Y: np.ndarray):

@@ -8,15 +8,28 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from fusion import validation
 from fusion.gaussian import Gaussian
 
 
+@functools.lru_cache(maxsize=256)
+def discretised(model, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(F, Q, F^-1)`` of a (frozen, hashable) motion model over ``dt``, computed once per pair and
+    returned read-only: an agent predicts every track over the same step, every step."""
+    matrices = (model.transition(dt), model.noise(dt), model.inverse_transition(dt))
+    for m in matrices:
+        m.setflags(write=False)
+    return matrices
+
+
 def predict(belief: Gaussian, model, dt: float) -> Gaussian:
     """Predict ``belief`` over ``dt`` seconds with a motion model (Merino Alg. 3.2, (3.11)-(3.13))."""
-    return belief.predict(model.transition(dt), model.noise(dt), model.inverse_transition(dt))
+    F, Q, F_inv = discretised(model, float(dt))
+    return belief.predict(F, Q, F_inv)
 
 
 def update(belief: Gaussian, model, z) -> Gaussian:
@@ -31,6 +44,6 @@ def eif_update(belief: Gaussian, model, z, linearization_point=None) -> Gaussian
     yet fully observable (e.g. a bearing-only track initialised from a prior along a ray)."""
     z = validation.as_vector(np.atleast_1d(np.asarray(z, dtype=float)), "measurement z", model.dim)
     mu = belief.mean if linearization_point is None else np.asarray(linearization_point, dtype=float)
-    H = model.jacobian(mu)
-    innovation = model.residual(z, model.h(mu))
+    z_hat, H = model.linearize(mu)
+    innovation = model.residual(z, z_hat)
     return belief.update(H, model.R_inv, innovation + H @ mu)

@@ -34,6 +34,10 @@ class _Model:
     def residual(self, z, z_hat) -> np.ndarray:
         return np.asarray(z, dtype=float) - z_hat
 
+    def linearize(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """``(h(x), dh/dx)`` in one call (models whose geometry is shared override it)."""
+        return self.h(x), self.jacobian(x)
+
     def _pad(self, J_position: np.ndarray) -> np.ndarray:
         H = np.zeros((J_position.shape[0], self.state_dim))
         H[:, : self.spatial_dims] = J_position
@@ -110,6 +114,9 @@ class Bearing3D(_Model):
         return np.array([np.arctan2(d[1], d[0]), np.arctan2(-d[2], np.sqrt(rho2))])
 
     def jacobian(self, x) -> np.ndarray:
+        return self.linearize(x)[1]
+
+    def linearize(self, x) -> tuple[np.ndarray, np.ndarray]:
         d, rho2 = self._delta(x)
         rho = np.sqrt(rho2)
         r2 = rho2 + d[2] ** 2
@@ -119,7 +126,7 @@ class Bearing3D(_Model):
                 [d[2] * d[0] / (rho * r2), d[2] * d[1] / (rho * r2), -rho / r2],
             ]
         )
-        return self._pad(J)
+        return np.array([np.arctan2(d[1], d[0]), np.arctan2(-d[2], rho)]), self._pad(J)
 
     def residual(self, z, z_hat) -> np.ndarray:
         r = np.asarray(z, dtype=float) - z_hat

@@ -65,6 +65,19 @@ def as_pd(value, name: str, size: int | None = None) -> np.ndarray:
     return arr
 
 
+def shaped(value, name: str, shape: tuple) -> np.ndarray:
+    """``value`` as a float array of ``shape`` (``None`` matches any length): the hot-path check. Finiteness
+    is checked on the result of the operation instead, where one test covers every input."""
+    arr = value if type(value) is np.ndarray and value.dtype == np.float64 else np.asarray(value, dtype=float)
+    got = arr.shape
+    if got == shape or (
+        len(got) == len(shape) and all(w is None or g == w for g, w in zip(got, shape, strict=True))
+    ):
+        return arr
+    expected = "x".join("m" if w is None else str(w) for w in shape)
+    raise ValueError(f"{name} must have shape {expected}, got {got}")
+
+
 def measurement_terms(H, R_inv, z, state_dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cheap checks for the hot path of a linear(ised) update: shapes, and a finite ``H`` and ``z``.
 
@@ -80,16 +93,6 @@ def measurement_terms(H, R_inv, z, state_dim: int) -> tuple[np.ndarray, np.ndarr
         raise ValueError(f"inverse measurement noise R^-1 must be {H.shape[0]}x{H.shape[0]}, got shape {R_inv.shape}")
     z = as_vector(np.atleast_1d(z), "measurement z", H.shape[0])
     return H, R_inv, z
-
-
-def finite_square(value, name: str, size: int) -> np.ndarray:
-    """A finite ``size x size`` matrix (shape and finiteness only: cheap enough for every prediction)."""
-    arr = np.asarray(value, dtype=float)
-    if arr.shape != (size, size):
-        raise ValueError(f"{name} must be {size}x{size}, got shape {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name} contains non-finite values (NaN or inf)")
-    return arr
 
 
 def min_eigenvalue(matrix: np.ndarray) -> float:

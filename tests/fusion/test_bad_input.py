@@ -124,10 +124,10 @@ def test_nees_rejects_bad_truth(truth, match):
 @pytest.mark.parametrize(
     ("F", "Q", "match"),
     [
-        (np.full((2, 2), NAN), np.eye(2), "transition matrix F contains non-finite"),
-        (np.eye(3), np.eye(2), "transition matrix F must be 2x2"),
-        (np.eye(2), [[1.0, NAN], [NAN, 1.0]], "process noise Q contains non-finite"),
-        (np.eye(2), np.eye(3), "process noise Q must be 2x2"),
+        (np.full((2, 2), NAN), np.eye(2), "non-finite result of the prediction"),
+        (np.eye(3), np.eye(2), "transition matrix F must have shape 2x2"),
+        (np.eye(2), [[1.0, NAN], [NAN, 1.0]], "non-finite result of the prediction"),
+        (np.eye(2), np.eye(3), "process noise Q must have shape 2x2"),
     ],
     ids=["nan-F", "F-wrong-size", "nan-Q", "Q-wrong-size"],
 )
@@ -140,16 +140,16 @@ def test_predict_rejects_non_finite_or_misshapen_model_matrices(F, Q, match):
 
 
 def test_predict_rejects_bad_inverse_transition():
-    with pytest.raises(ValueError, match="inverse transition must be 2x2"):
+    with pytest.raises(ValueError, match="inverse transition must have shape 2x2"):
         good().predict(np.eye(2), np.eye(2), F_inv=np.eye(3))
-    with pytest.raises(ValueError, match="inverse transition contains non-finite"):
+    with pytest.raises(ValueError, match="non-finite result of the prediction"):
         good().predict(np.eye(2), np.eye(2), F_inv=np.full((2, 2), NAN))
 
 
 @pytest.mark.parametrize(
     ("z", "match"),
-    [([NAN], "measurement z contains non-finite"), ([1.0, 2.0], "measurement z must have length 1"),
-     ([[1.0]], "measurement z must be a vector")],
+    [([NAN], "non-finite result of the update"), ([1.0, 2.0], "measurement z must have shape 1"),
+     ([[1.0]], "measurement z must have shape 1")],
     ids=["nan-z", "z-wrong-length", "z-matrix"],
 )
 def test_linear_update_rejects_bad_measurement(z, match):
@@ -175,11 +175,11 @@ def test_eif_update_rejects_bad_measurement(z, match):
 
 def test_update_rejects_misshapen_or_non_finite_H_and_R_inv():
     """H with the wrong number of columns for the state, a NaN in H, R^-1 of the wrong size."""
-    with pytest.raises(ValueError, match="measurement matrix H must be m x 2"):
+    with pytest.raises(ValueError, match="measurement matrix H must have shape mx2"):
         good().update(np.eye(3), np.eye(3), np.zeros(3))
-    with pytest.raises(ValueError, match="measurement matrix H contains non-finite"):
+    with pytest.raises(ValueError, match="non-finite result of the update"):
         good().update(np.array([[NAN, 1.0]]), np.eye(1), [0.0])
-    with pytest.raises(ValueError, match="inverse measurement noise R\\^-1 must be 1x1"):
+    with pytest.raises(ValueError, match="inverse measurement noise R\\^-1 must have shape 1x1"):
         good().update(np.array([[1.0, 0.0]]), np.eye(2), [0.0])
 
 
