@@ -228,6 +228,12 @@ class Tracker:
             return []
         ids, cost = self._distances(bearings)
         gated = np.where(cost <= self.config.gate, cost, _UNASSIGNED)
+        # Confirmed tracks have the first claim on the detections in their gates: a tentative track started
+        # by one of the ~1 % of a target's detections that fall outside its gate is broad (small d^2), so
+        # otherwise it takes the target's next detections, gets confirmed and stays a duplicate.
+        tentative = np.array([not self.tracks[i].confirmed for i in ids])
+        gated[:, tentative] = np.where(gated[:, tentative] < _UNASSIGNED, gated[:, tentative] + self.config.gate,
+                                       _UNASSIGNED)
         rows, cols = linear_sum_assignment(gated)
         return [(int(r), ids[c]) for r, c in zip(rows, cols, strict=True) if gated[r, c] < _UNASSIGNED]
 

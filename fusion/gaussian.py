@@ -25,7 +25,6 @@ from scipy.linalg.lapack import dpotrf, dpotrs
 
 from fusion import validation
 
-
 _sum = np.add.reduce  # without ndarray.sum's Python wrapper: this runs on every predict and update
 
 
