@@ -56,6 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
         run.add_argument("--policy", choices=["naive", "exact", "ci", "hybrid"], help="fusion policy")
         run.add_argument("--out", type=Path, default=Path("runs"), help="where run folders go (default: runs)")
         run.add_argument("--rerun", default="save", help="save (default), spawn, connect:URL or off")
+        run.add_argument("--lockstep", action="store_true",
+                         help="all agents in this process over an in-memory bus, deterministic and fast")
 
     view = commands.add_parser("view", help="the ground station: log a fleet to Rerun",
                                description="Subscribe to a fleet on Zenoh and log it to Rerun.")
@@ -98,6 +100,7 @@ def _bench(args) -> int:
 
 def _run(args) -> int:
     from mesh_sim.launcher import Launcher, new_run_dir
+    from mesh_sim.lockstep import run_lockstep
     from mesh_sim.results import summary_table
     from mesh_sim.scenario import load
 
@@ -107,19 +110,25 @@ def _run(args) -> int:
         overrides["tracking"] = {"policy": args.policy}
     try:
         scenario = load(args.scenario, **overrides)
-        launcher = Launcher(scenario, new_run_dir(args.out, scenario.name), speed=args.speed, rerun=args.rerun,
-                            console=console)
+        run_dir = new_run_dir(args.out, scenario.name)
+        if args.lockstep:
+            if args.rerun not in ("save", "off"):
+                raise ValueError("--lockstep records with --rerun save or off")
+            metrics, status = run_lockstep(scenario, run_dir, rerun=args.rerun), "completed"
+        else:
+            outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console).run()
+            metrics, status = outcome.metrics, outcome.status
     except (ValueError, OSError) as err:
         print(f"skymesh run: {err}", file=sys.stderr)
         return EXIT_USAGE
-    outcome = launcher.run()
-    console.print(summary_table(outcome.metrics))
-    console.print(f"Results: {outcome.run_dir}  (metrics.json, plots/, logs/"
+    console.print(summary_table(metrics))
+    console.print(f"Results: {run_dir}  (metrics.json, plots/"
+                  + (", logs/" if not args.lockstep else "")
                   + (", recording.rrd: open with `rerun recording.rrd`" if args.rerun == "save" else "") + ")",
                   highlight=False)
-    if outcome.status == "interrupted":
+    if status == "interrupted":
         return 130
-    return 0 if outcome.status == "completed" else 1
+    return 0 if status == "completed" else 1
 
 
 def _view(args) -> int:

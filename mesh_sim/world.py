@@ -69,6 +69,40 @@ class Oracle:
         self.evaluator.record(t, truth_snapshot(targets, t), self.tracker.estimates())
 
 
+class World:
+    """Truth publishing and the oracle, over any transport (Zenoh in a live run, the bus in lockstep)."""
+
+    def __init__(self, scenario, transport, keys: Keys):
+        self.scenario = scenario
+        self.transport = transport
+        self.keys = keys
+        self.oracle = Oracle(scenario.agent)
+        self.seq = 0
+
+    def publish_truth(self, t: float) -> None:
+        self.seq += 1
+        env = wire.Envelope(kind="truth", origin="world", seq=self.seq, stamp=t,
+                            payload={"targets": truth_snapshot(self.scenario.targets, t)})
+        self.transport.publish(self.keys.sim("truth"), wire.encode(env))
+
+    def absorb_measurements(self) -> None:
+        """Feed every agent's raw bearings to the oracle, then score it."""
+        for item in self.transport.drain():
+            try:
+                self.oracle.add(wire.decode(item.data, expected_origin=self.keys.parse(item.key)[-1]))
+            except (wire.DecodeError, ValueError):
+                self.oracle.rejected += 1
+        self.oracle.evaluate(self.scenario.targets)
+
+    def tick(self, t: float) -> None:
+        self.publish_truth(t)
+        self.absorb_measurements()
+
+    def summary(self) -> dict:
+        return {"targets": self.oracle.evaluator.summary(), "late_measurements": self.oracle.late,
+                "rejected": self.oracle.rejected}
+
+
 def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     p = argparse.ArgumentParser(prog="python -m mesh_sim.world")
@@ -90,34 +124,16 @@ def main(argv=None) -> int:
         return 2
     keys = Keys(args.fleet)
     transport = ZenohTransport("world", keys, config, [keys.sim("measurement/*")], liveliness=False)
-    oracle = Oracle(scenario.agent)
-    seq = 0
-
-    def tick(t: float) -> None:
-        nonlocal seq
-        seq += 1
-        env = wire.Envelope(kind="truth", origin="world", seq=seq, stamp=t,
-                            payload={"targets": truth_snapshot(scenario.targets, t)})
-        transport.publish(keys.sim("truth"), wire.encode(env))
-        for item in transport.drain():
-            try:
-                oracle.add(wire.decode(item.data, expected_origin=keys.parse(item.key)[-1]))
-            except (wire.DecodeError, ValueError):
-                oracle.rejected += 1
-        oracle.evaluate(scenario.targets)
-
+    world = World(scenario, transport, keys)
     stop = threading.Event()
     install_stop_handlers(stop)
     clock = SimClock(args.epoch, args.speed)
     started = time.time()
     try:
-        stats = run_steps(tick, clock, 1.0 / TRUTH_RATE_HZ, args.duration + 1.0, stop, args.parent_pid)
+        stats = run_steps(world.tick, clock, 1.0 / TRUTH_RATE_HZ, args.duration + 1.0, stop, args.parent_pid)
     finally:
         transport.close()
-    write_json(Path(args.out) / "oracle.json", {
-        "targets": oracle.evaluator.summary(), "late_measurements": oracle.late,
-        "rejected": oracle.rejected, "wall_s": time.time() - started, **stats.as_dict(),
-    })
+    write_json(Path(args.out) / "oracle.json", {**world.summary(), "wall_s": time.time() - started, **stats.as_dict()})
     return 0
 
 
