@@ -12,6 +12,7 @@ older than the last one from the same origin are dropped by ``(origin, seq)``.
 
 from __future__ import annotations
 
+import heapq
 import logging
 from collections import Counter
 from dataclasses import dataclass
@@ -21,9 +22,11 @@ import numpy as np
 from agent import wire
 from agent.config import AgentScenario
 from agent.evaluation import TrackEvaluator
+from agent.netem import LinkEmulator
+from agent.sending import SendScheduler
 from agent.sensing import Bearing, GeometricBearingSensor
 from agent.topology import Topology
-from agent.tracking import Tracker
+from agent.tracking import RemoteTrack, Tracker
 from agent.transport import Keys
 from agent.vehicle import goal_to_setpoint, vehicle_from_config
 from perception.terrain import terrain_from_config
@@ -33,6 +36,7 @@ log = logging.getLogger("skymesh.agent")
 
 TRUTH_MAX_AGE = 2.0  # s of simulation time; older truth is not extrapolated (chosen here)
 FUTURE_EPOCHS = 50  # a peer's belief this many steps ahead of ours is rejected as a clock fault (chosen here)
+TRACK_ENTRY_BYTES = 5000  # budget charged per track sent: an 8-state trajectory encodes to ~4.8 kB
 
 
 @dataclass
@@ -41,6 +45,7 @@ class Counters:
     bytes_rx: Counter  # (peer, kind) -> bytes
     rejected: Counter  # reason -> messages
     fusions: Counter  # method -> remote tracks fused
+    radio_drops: Counter  # (peer, cause) -> messages the emulated radio dropped
     latencies: list  # stamp-to-fusion delays of received beliefs [s of simulation time]
 
 
@@ -65,14 +70,19 @@ class Agent:
         )
         self.evaluator = TrackEvaluator()
         self.topology = Topology(agent_id)
-        self.counters = Counters(Counter(), Counter(), Counter(), Counter(), [])
+        self.counters = Counters(Counter(), Counter(), Counter(), Counter(), Counter(), [])
+        plan = scenario.radio_plan
+        self.link = None if plan is None else LinkEmulator(agent_id, plan)
+        self.sender = SendScheduler(scenario.sending, None if plan is None else plan.sender_budget(agent_id))
+        self._pending: list = []  # (deliver_at, order, envelope, size): messages the radio delays
+        self._order = 0
+        self._uav_positions: dict[str, np.ndarray] = {}
+        self.telemetry_thinned = 0
         self.steps = 0
         self._seq = 0
         self._last_seq: dict[tuple[str, str], int] = {}  # (origin, kind) -> last seq accepted
-        self._acks: dict[str, int] = {}  # peer -> last track message seq received from it
         self._logged: set[tuple[str, str]] = set()
         self._truth: tuple[float, list[dict]] | None = None
-        self._next_send = 0.0
         self.last_bearings: list[Bearing] = []
 
     # -- the loop -------------------------------------------------------------------------------
@@ -86,10 +96,10 @@ class Agent:
         self._publish_measurements(t, bearings)
         for item in self.transport.drain():
             self.receive(item, t)
-        if t + 1e-9 >= self._next_send:
-            self._publish_tracks(t)
-            self._next_send = t + self.scenario.send_period
+        self._release_delayed(t)
         self._publish_telemetry(t, state, bearings)
+        if self.sender.due(t):
+            self._publish_tracks(t)
         estimates = self.tracker.estimates()
         goal = self.planner.plan(state.position, [(tid, est.mean[:2]) for tid, est in estimates])
         self.vehicle.set_setpoint(goal_to_setpoint(goal))
@@ -118,27 +128,47 @@ class Agent:
         if seen is not None and env.seq <= seen:
             return self._reject(env.origin, "duplicate", log_it=False)
         self._last_seq[(env.origin, env.kind)] = env.seq
-        self.counters.bytes_rx[(env.origin, env.kind)] += len(item.data)
+        if env.kind == "truth":
+            return self._accept_truth(env)
+        if self.link is not None and env.origin in self.link.plan.agents:
+            verdict = self.link.admit(env.origin, env.seq, len(item.data), env.stamp, self._radio_positions())
+            if verdict.cause is not None:
+                self.counters.radio_drops[(env.origin, verdict.cause)] += 1
+                return None
+            if verdict.deliver_at > t:
+                heapq.heappush(self._pending, (verdict.deliver_at, self._order, env, len(item.data)))
+                self._order += 1
+                return None
+        self._deliver(env, len(item.data), t)
+
+    def _radio_positions(self) -> dict:
+        return {**self._uav_positions, self.id: self.vehicle.state().position}
+
+    def _release_delayed(self, t: float) -> None:
+        while self._pending and self._pending[0][0] <= t:
+            _, _, env, size = heapq.heappop(self._pending)
+            self._deliver(env, size, t)
+
+    def _deliver(self, env: wire.Envelope, size: int, t: float) -> None:
+        """A message that made it through the radio: count it and use it."""
+        self.counters.bytes_rx[(env.origin, env.kind)] += size
         if env.kind in ("track", "telemetry"):
             self.topology.heard(env.origin, t)
-        if env.kind == "telemetry" and isinstance(env.payload.get("neighbours"), list):
-            self.topology.report(env.origin, t, env.payload["neighbours"])
+        if env.kind == "telemetry":
+            self.topology.learn(env.payload.get("topology"))
         if env.kind == "track":
             self._fuse_tracks(env, t)
-        elif env.kind == "truth":
-            self._accept_truth(env)
 
     def _fuse_tracks(self, env: wire.Envelope, t: float) -> None:
         try:
             remote = self._decode_tracks(env.payload)
         except wire.DecodeError as err:
             return self._reject(env.origin, err.reason)
-        if any(b.epoch > self.tracker.epoch + FUTURE_EPOCHS for _, b, _ in remote):
+        if any(r.belief.epoch > self.tracker.epoch + FUTURE_EPOCHS for r in remote):
             return self._reject(env.origin, "future_epoch")
-        tree_edge = self.topology.is_tree_edge(env.origin, t, self.transport.alive())
-        for out in self.tracker.fuse_remote(env.origin, remote, env.acks.get(self.id), env.seq, tree_edge):
+        tree_edge = self.topology.is_tree_edge(env.origin, t)
+        for out in self.tracker.fuse_remote(env.origin, remote, env.seq, tree_edge):
             self.counters.fusions[out.method] += 1
-        self._acks[env.origin] = env.seq
         self.counters.latencies.append(t - env.stamp)
 
     def _decode_tracks(self, payload: dict) -> list:
@@ -149,16 +179,22 @@ class Agent:
         for entry in tracks:
             if not isinstance(entry, dict) or not isinstance(entry.get("id"), int) or "belief" not in entry:
                 raise wire.DecodeError("bad_field", "each track needs an integer id and a belief")
-            last = entry.get("last_measured")
+            last, acks = entry.get("last_measured"), entry.get("acks", {})
             if isinstance(last, bool) or not isinstance(last, int | float) or not np.isfinite(last):
                 raise wire.DecodeError("bad_field", "each track needs a finite last_measured time")
-            out.append((entry["id"], wire.decode_trajectory(entry["belief"], self.tracker.model), float(last)))
+            if not isinstance(acks, dict) or not all(isinstance(v, int) and v >= 0 for v in acks.values()):
+                raise wire.DecodeError("bad_field", "track acks must map peers to sequence numbers")
+            belief = wire.decode_trajectory(entry["belief"], self.tracker.model)
+            out.append(RemoteTrack(entry["id"], belief, float(last), acks.get(self.id)))
         return out
 
     def _accept_truth(self, env: wire.Envelope) -> None:
         targets = env.payload.get("targets")
         if isinstance(targets, list):
             self._truth = (env.stamp, targets)
+        uavs = env.payload.get("uavs")
+        if isinstance(uavs, dict):  # the simulator's knowledge of where everyone is: the radio's range check
+            self._uav_positions = {k: np.asarray(v, float) for k, v in uavs.items() if k != self.id}
 
     def truth_at(self, t: float) -> list[dict] | None:
         """The world's latest truth, extrapolated at constant velocity to ``t``."""
@@ -181,7 +217,7 @@ class Agent:
     # -- sending --------------------------------------------------------------------------------
     def _envelope(self, kind: str, t: float, payload: dict) -> bytes:
         self._seq += 1
-        env = wire.Envelope(kind=kind, origin=self.id, seq=self._seq, stamp=t, acks=dict(self._acks), payload=payload)
+        env = wire.Envelope(kind=kind, origin=self.id, seq=self._seq, stamp=t, payload=payload)
         return wire.encode(env, self.fleet_key)
 
     def _send(self, key: str, kind: str, data: bytes) -> None:
@@ -189,10 +225,15 @@ class Agent:
         self.counters.bytes_tx[kind] += len(data)
 
     def _publish_tracks(self, t: float) -> None:
+        chosen = self.sender.choose(t, self.tracker.confirmed(), TRACK_ENTRY_BYTES)
+        if not chosen:
+            return
         seq = self._seq + 1  # the sequence number the envelope below will carry
+        self.tracker.record_sent(chosen, seq)
         tracks = [
-            {"id": tr.id, "belief": wire.encode_trajectory(tr.belief), "last_measured": tr.last_measured}
-            for tr in self.tracker.outgoing(seq)
+            {"id": tr.id, "belief": wire.encode_trajectory(tr.belief), "last_measured": tr.last_measured,
+             "acks": dict(tr.acks)}
+            for tr in chosen
         ]
         self._send(self.keys.belief("track", self.id), "track", self._envelope("track", t, {"tracks": tracks}))
 
@@ -201,9 +242,14 @@ class Agent:
             "position": state.position, "velocity": state.velocity, "yaw": float(state.yaw),
             "bearings": np.array([b.azel for b in bearings]).reshape(-1, 2),
             "neighbours": self.topology.neighbours(t),
+            "topology": self.topology.gossip(t),
             "tracks": [{"id": tid, "mean": est.mean, "cov": est.cov} for tid, est in self.tracker.estimates()],
         }
-        self._send(self.keys.telemetry(self.id), "telemetry", self._envelope("telemetry", t, payload))
+        data = self._envelope("telemetry", t, payload)
+        if self.sender.admit(len(data), t):
+            self._send(self.keys.telemetry(self.id), "telemetry", data)
+        else:
+            self.telemetry_thinned += 1
 
     def _publish_measurements(self, t: float, bearings: list[Bearing]) -> None:
         """Raw bearings for the centralized oracle (simulation only; a real fleet does not send these)."""
@@ -227,6 +273,10 @@ class Agent:
             "msgs_rejected": int(sum(v for k, v in self.counters.rejected.items() if k != "duplicate")),
             "rejected_by_reason": dict(self.counters.rejected),
             "fusions": dict(self.counters.fusions),
+            "radio_drops": _by_peer(self.counters.radio_drops),
+            "radio_drops_by_cause": dict(Counter(cause for (_, cause) in self.counters.radio_drops.elements())),
+            "tracks_thinned": self.sender.thinned,
+            "telemetry_thinned": self.telemetry_thinned,
             "belief_latency_s": {
                 "mean": float(lat.mean()) if lat.size else None,
                 "p95": float(np.percentile(lat, 95)) if lat.size else None,

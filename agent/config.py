@@ -14,14 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
+from agent.netem import LinkPlan
+from agent.sending import SendConfig
 from agent.sensing import BearingSensorConfig
 from agent.tracking import TrackerConfig
 
 #: Top-level keys that the world reads; the agent accepts and ignores them.
 WORLD_KEYS = frozenset({"targets", "radio", "description"})
 AGENT_KEYS = frozenset(
-    {"name", "duration", "agents", "rate_hz", "send_period", "altitude", "area", "origin", "terrain", "vehicle",
-     "sensor", "tracking", "tasking", "seed"}
+    {"name", "duration", "agents", "rate_hz", "altitude", "area", "origin", "terrain", "vehicle",
+     "sensor", "tracking", "sending", "tasking", "seed", "radio_plan"}
 )
 
 
@@ -46,7 +48,6 @@ class AgentScenario:
     duration: float = 60.0
     agents: int = 4
     rate_hz: float = 5.0  # DESIGN.md §4 default agent rate
-    send_period: float = 1.0  # seconds between belief broadcasts; chosen here
     altitude: float = 80.0  # flight height above the origin [m]; chosen here
     seed: int = 1
     area: Area = field(default_factory=lambda: Area((-150.0, 150.0), (-150.0, 150.0)))
@@ -55,10 +56,12 @@ class AgentScenario:
     vehicle: dict = field(default_factory=lambda: {"kind": "multirotor"})
     sensor: BearingSensorConfig = field(default_factory=BearingSensorConfig)
     tracking: TrackerConfig = field(default_factory=TrackerConfig)
+    sending: SendConfig = field(default_factory=SendConfig)
     tasking: dict = field(default_factory=dict)
+    radio_plan: LinkPlan | None = None  # compiled by the simulator from the scenario's [radio]; None: ideal links
 
     def __post_init__(self):
-        for name in ("duration", "rate_hz", "send_period", "altitude"):
+        for name in ("duration", "rate_hz", "altitude"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
@@ -80,9 +83,8 @@ class AgentScenario:
         unknown = set(d) - AGENT_KEYS - WORLD_KEYS
         if unknown:
             raise ValueError(f"unknown scenario settings: {sorted(unknown)}")
-        kwargs = {k: d[k] for k in ("name", "duration", "agents", "rate_hz", "send_period", "altitude", "seed")
-                  if k in d}
-        for number in ("duration", "rate_hz", "send_period", "altitude"):
+        kwargs = {k: d[k] for k in ("name", "duration", "agents", "rate_hz", "altitude", "seed") if k in d}
+        for number in ("duration", "rate_hz", "altitude"):
             if number in kwargs:
                 kwargs[number] = _number(kwargs[number], number)
         if "area" in d:
@@ -97,6 +99,10 @@ class AgentScenario:
             kwargs["sensor"] = BearingSensorConfig.from_dict(d["sensor"])
         if "tracking" in d:
             kwargs["tracking"] = _dataclass_from_dict(TrackerConfig, d["tracking"], "tracking")
+        if "sending" in d:
+            kwargs["sending"] = _dataclass_from_dict(SendConfig, d["sending"], "sending")
+        if d.get("radio_plan") is not None:
+            kwargs["radio_plan"] = LinkPlan.from_dict(d["radio_plan"])
         return cls(**kwargs)
 
 

@@ -1,11 +1,15 @@
 """What an agent knows of the communication graph, to decide which links are tree edges.
 
 Channel filters are exact only on tree edges: links that lie on no loop (bridges of the graph;
-Merino §2.5). Each agent reports in its telemetry the peers it heard recently; from its own and its
-peers' reports it rebuilds the graph and asks whether a link is a bridge. Knowledge is only trusted
-when it is complete — a fresh report from every live agent — otherwise every link is treated as
-possibly on a loop, and ``hybrid`` fuses by intersection. An edge counts if either end reports it
-(more edges, fewer bridges: the conservative side).
+Merino §2.5). Each agent reports the peers it heard recently, and its telemetry carries every fresh
+report it knows (its own and what it learnt from others), so reports spread over several hops. From
+them an agent rebuilds the graph and asks whether a link is a bridge.
+
+Knowledge is trusted only when it is complete: every agent that appears in a fresh report, as reporter
+or as neighbour, has a fresh report of its own. Otherwise every link is treated as possibly on a loop,
+and ``hybrid`` fuses by intersection. An edge counts if either end reports it (more edges, fewer
+bridges: the conservative side). Agents cut off by a partition stop appearing in fresh reports, so a
+partitioned component can still recognise its own tree edges.
 """
 
 from __future__ import annotations
@@ -20,27 +24,41 @@ class Topology:
         self.me = me
         self.timeout = timeout
         self._heard: dict[str, float] = {}  # peer -> last time heard
-        self._reports: dict[str, tuple[float, frozenset[str]]] = {}  # peer -> (time, its neighbours)
+        self._reports: dict[str, tuple[float, frozenset[str]]] = {}  # agent -> (report time, its neighbours)
 
     def heard(self, peer: str, t: float) -> None:
         self._heard[peer] = max(t, self._heard.get(peer, t))
 
-    def report(self, peer: str, t: float, neighbours) -> None:
-        self._reports[peer] = (t, frozenset(str(n) for n in neighbours))
-
     def neighbours(self, t: float) -> list[str]:
         return sorted(p for p, last in self._heard.items() if t - last <= self.timeout)
 
-    def is_tree_edge(self, peer: str, t: float, alive: set[str]) -> bool:
+    def learn(self, gossip) -> None:
+        """Merge reports ``{agent: [report time, [neighbours]]}`` received from a peer (newest wins).
+        Malformed entries are ignored: this is advisory data from the wire."""
+        if not isinstance(gossip, dict):
+            return
+        for agent, entry in gossip.items():
+            if agent == self.me or not isinstance(entry, list | tuple) or len(entry) != 2:
+                continue
+            when, neighbours = entry
+            if isinstance(when, int | float) and isinstance(neighbours, list | tuple):
+                if agent not in self._reports or when > self._reports[agent][0]:
+                    self._reports[agent] = (float(when), frozenset(str(n) for n in neighbours))
+
+    def gossip(self, t: float) -> dict:
+        """Every fresh report this agent knows, its own included, for its telemetry."""
+        fresh = {a: [w, sorted(n)] for a, (w, n) in self._reports.items() if t - w <= self.timeout}
+        fresh[self.me] = [t, self.neighbours(t)]
+        return fresh
+
+    def is_tree_edge(self, peer: str, t: float) -> bool:
         """True if ``(me, peer)`` is a bridge of the graph known at ``t`` and that knowledge is complete."""
-        agents = set(alive) | {self.me} | set(self.neighbours(t))
-        fresh = {p: n for p, (when, n) in self._reports.items() if t - when <= self.timeout}
-        if any(a not in fresh for a in agents - {self.me}):
+        reports = {a: n for a, (w, n) in self._reports.items() if t - w <= self.timeout}
+        reports[self.me] = frozenset(self.neighbours(t))
+        seen = set(reports) | {n for ns in reports.values() for n in ns}
+        if not seen <= set(reports):
             return False
-        edges = {frozenset((self.me, n)) for n in self.neighbours(t)}
-        for p, reported in fresh.items():
-            edges |= {frozenset((p, n)) for n in reported if n != p}
-        names = sorted(agents | {x for e in edges for x in e})
+        names = sorted(seen)
         index = {name: i for i, name in enumerate(names)}
-        numbered = [tuple(index[x] for x in e) for e in edges]
-        return frozenset((index[self.me], index[peer])) in bridges(len(names), numbered)
+        edges = {frozenset((index[a], index[n])) for a, ns in reports.items() for n in ns if n != a}
+        return peer in index and frozenset((index[self.me], index[peer])) in bridges(len(names), edges)

@@ -89,6 +89,18 @@ class TrackerConfig:
             raise ValueError(f"tracking.policy must be naive, exact, ci or hybrid, got {self.policy!r}")
 
 
+@dataclass(frozen=True)
+class RemoteTrack:
+    """A peer's track as received: its id, belief, newest measurement time, and the seq of *our* message
+    whose copy of this track the peer had fused (``None``: nothing of ours) — a per-track acknowledgement,
+    so that a message that carries only some tracks (bandwidth thinning) never confuses the channel filter."""
+
+    id: int
+    belief: Trajectory
+    last_measured: float
+    ack: int | None
+
+
 @dataclass
 class Track:
     id: int
@@ -97,7 +109,7 @@ class Track:
     created_epoch: int
     hits: int = 1
     confirmed: bool = False
-    first_sent_seq: int | None = None
+    acks: dict = field(default_factory=dict)  # peer -> seq of the peer's message whose copy of this track we fused
     last_measured: float = 0.0  # simulation time of the newest measurement fused into this track
     truth_id: str | None = None  # only the oracle, which associates by label, sets this
     fusions: dict = field(default_factory=dict)  # method -> count
@@ -272,36 +284,27 @@ class Tracker:
         return track
 
     # -- exchange with peers --------------------------------------------------------------------
-    def outgoing(self, seq: int) -> list[Track]:
-        """The confirmed tracks to broadcast as message ``seq``; records them in the channel filters."""
-        out = []
-        for track in self.tracks.values():
-            if track.confirmed:
-                track.channels.on_send(track.belief, seq)
-                if track.first_sent_seq is None:
-                    track.first_sent_seq = seq
-                out.append(track)
-        return out
+    def confirmed(self) -> list[Track]:
+        return [t for t in self.tracks.values() if t.confirmed]
 
-    def fuse_remote(
-        self, peer: str, remote: list[tuple[int, Trajectory, float]], acked_seq: int | None, seq: int,
-        tree_edge: bool = True,
-    ) -> list[Received]:
-        """Fuse a peer's tracks ``(remote id, belief, last measured)`` from message ``seq``, which
-        acknowledged our message ``acked_seq``."""
+    def record_sent(self, tracks: list[Track], seq: int) -> None:
+        """Record in the channel filters that ``tracks`` went out in message ``seq``."""
+        for track in tracks:
+            track.channels.on_send(track.belief, seq)
+
+    def fuse_remote(self, peer: str, remote: list[RemoteTrack], seq: int, tree_edge: bool = True) -> list[Received]:
+        """Fuse a peer's tracks from its message ``seq``."""
         results = []
-        claimed = {self.labels[(peer, rid)] for rid, _, _ in remote if (peer, rid) in self.labels}
-        for remote_id, belief, last_measured in remote:
-            belief = belief if belief.epoch >= self.epoch else belief.advanced_to(self.epoch)
+        claimed = {self.labels[(peer, r.id)] for r in remote if (peer, r.id) in self.labels}
+        for r in remote:
+            belief = r.belief if r.belief.epoch >= self.epoch else r.belief.advanced_to(self.epoch)
             self.epoch = max(self.epoch, belief.epoch)
-            track = self._match_remote(peer, remote_id, belief, claimed)
-            ack = acked_seq
-            if track.first_sent_seq is None or ack is None or ack < track.first_sent_seq:
-                ack = None  # the peer has nothing of ours about this track
-            out = track.channels.on_receive(peer, track.belief, belief, ack, seq=seq, tree_edge=tree_edge)
+            track = self._match_remote(peer, r.id, belief, claimed)
+            out = track.channels.on_receive(peer, track.belief, belief, r.ack, seq=seq, tree_edge=tree_edge)
             track.belief = out.fused
             track.confirmed = True
-            track.last_measured = max(track.last_measured, last_measured)
+            track.acks[peer] = seq
+            track.last_measured = max(track.last_measured, r.last_measured)
             track.fusions[out.method] = track.fusions.get(out.method, 0) + 1
             results.append(out)
         self.merge_duplicates()
@@ -324,6 +327,7 @@ class Tracker:
                 for peer in set(keep.channels.neighbours()) | set(drop.channels.neighbours()):
                     keep.channels.desynchronize(peer)
                 self.labels = {k: (keep_id if v == drop_id else v) for k, v in self.labels.items()}
+                keep.acks = {}  # after an intersection, no peer holds "our copy" of this track any more
                 del self.tracks[drop_id]
                 merged += 1
         return merged

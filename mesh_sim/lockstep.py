@@ -40,7 +40,7 @@ def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off") -> dict:
         Agent(f"uav{i}", i, sc, bus.endpoint(f"uav{i}", agent_subscriptions(keys)), keys, seed=sc.seed * 1000 + i)
         for i in range(sc.agents)
     ]
-    world = World(scenario, bus.endpoint("world", [keys.sim("measurement/*")]), keys)
+    world = World(scenario, bus.endpoint("world", World.subscriptions(keys)), keys)
     observer, watch = None, None
     if rerun == "save":
         from mesh_sim.observer import Observer

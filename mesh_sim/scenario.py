@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agent.config import AgentScenario, read_scenario_file
+from mesh_sim.radio import compile_plan
 from mesh_sim.targets import targets_from_config
 from perception.terrain import terrain_from_config
 
@@ -56,6 +57,9 @@ def load(name_or_path: str, **overrides) -> Scenario:
         elif value is not None:
             raw[key] = value
     try:
+        if "radio" in raw:
+            agents = [f"uav{i}" for i in range(int(raw.get("agents", AgentScenario.agents)))]
+            raw["radio_plan"] = compile_plan(raw["radio"], agents, int(raw.get("seed", AgentScenario.seed)))
         agent = AgentScenario.from_dict(raw)
         targets = targets_from_config(raw.get("targets", []), terrain_from_config(agent.terrain))
     except (ValueError, TypeError, KeyError) as err:

@@ -78,21 +78,36 @@ class World:
         self.keys = keys
         self.oracle = Oracle(scenario.agent)
         self.seq = 0
+        self.uavs: dict[str, list] = {}  # agent -> last reported position (the radio's range check uses it)
+
+    @staticmethod
+    def subscriptions(keys: Keys) -> list[str]:
+        return [keys.sim("measurement/*"), keys.telemetry("*")]
 
     def publish_truth(self, t: float) -> None:
         self.seq += 1
         env = wire.Envelope(kind="truth", origin="world", seq=self.seq, stamp=t,
-                            payload={"targets": truth_snapshot(self.scenario.targets, t)})
+                            payload={"targets": truth_snapshot(self.scenario.targets, t), "uavs": dict(self.uavs)})
         self.transport.publish(self.keys.sim("truth"), wire.encode(env))
 
     def absorb_measurements(self) -> None:
         """Feed every agent's raw bearings to the oracle, then score it."""
         for item in self.transport.drain():
             try:
-                self.oracle.add(wire.decode(item.data, expected_origin=self.keys.parse(item.key)[-1]))
+                env = wire.decode(item.data, expected_origin=self.keys.parse(item.key)[-1])
             except (wire.DecodeError, ValueError):
                 self.oracle.rejected += 1
+                continue
+            if env.kind == "telemetry":
+                self._note_position(env)
+            else:
+                self.oracle.add(env)
         self.oracle.evaluate(self.scenario.targets)
+
+    def _note_position(self, env: wire.Envelope) -> None:
+        position = np.asarray(env.payload.get("position", ()), float)
+        if position.shape == (3,) and np.all(np.isfinite(position)):
+            self.uavs[env.origin] = position.tolist()
 
     def tick(self, t: float) -> None:
         self.publish_truth(t)
@@ -123,7 +138,7 @@ def main(argv=None) -> int:
         print(f"world: {err}", file=sys.stderr)
         return 2
     keys = Keys(args.fleet)
-    transport = ZenohTransport("world", keys, config, [keys.sim("measurement/*")], liveliness=False)
+    transport = ZenohTransport("world", keys, config, World.subscriptions(keys), liveliness=False)
     world = World(scenario, transport, keys)
     stop = threading.Event()
     install_stop_handlers(stop)
