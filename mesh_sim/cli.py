@@ -54,6 +54,11 @@ def build_parser() -> argparse.ArgumentParser:
         run.add_argument("--speed", type=float, default=1.0, help="simulation seconds per wall second")
         run.add_argument("--seed", type=int, help="random seed (overrides the scenario)")
         run.add_argument("--policy", choices=["naive", "exact", "ci", "hybrid"], help="fusion policy")
+        run.add_argument("--topology", choices=["full", "ring", "star", "line", "tree", "random", "disk"],
+                         help="radio topology (overrides the scenario's [radio])")
+        run.add_argument("--loss", type=float, help="Bernoulli loss probability per message, 0..1")
+        run.add_argument("--latency", type=float, metavar="MS", help="one-way delay in milliseconds")
+        run.add_argument("--bandwidth", type=float, metavar="BYTES_PER_S", help="per-link rate cap")
         run.add_argument("--out", type=Path, default=Path("runs"), help="where run folders go (default: runs)")
         run.add_argument("--rerun", default="save", help="save (default), spawn, connect:URL or off")
         run.add_argument("--lockstep", action="store_true",
@@ -108,6 +113,10 @@ def _run(args) -> int:
     overrides = {"agents": args.agents, "duration": args.duration, "seed": args.seed}
     if args.policy:
         overrides["tracking"] = {"policy": args.policy}
+    radio = {key: value for key, value in (("topology", args.topology), ("loss", args.loss),
+                                           ("delay_ms", args.latency), ("rate", args.bandwidth)) if value is not None}
+    if radio:
+        overrides["radio"] = radio
     try:
         scenario = load(args.scenario, **overrides)
         run_dir = new_run_dir(args.out, scenario.name)

@@ -77,12 +77,13 @@ def _fmt(value, spec: str) -> str:
 
 def summary_table(metrics: dict) -> Table:
     table = Table(title=f"skymesh run — {metrics['status']}")
-    for col in ("agent", "RMSE [m]", "ANEES", "targets", "first track [s]", "bytes/s", "rejected", "deadline misses"):
+    for col in ("agent", "RMSE [m]", "ANEES", "targets", "first track [s]", "bytes/s", "radio drops", "rejected",
+                "deadline misses"):
         table.add_column(col, justify="right")
     duration = metrics["config"]["duration"]
     for a in metrics["agents"]:
         if "targets" not in a:
-            table.add_row(a["id"], a.get("status", "?"), *["-"] * 6)
+            table.add_row(a["id"], a.get("status", "?"), *["-"] * 7)
             continue
         rmse, anees = pooled(a["targets"])
         firsts = [t["time_to_first_track"] for t in a["targets"] if t["time_to_first_track"] is not None]
@@ -90,14 +91,20 @@ def summary_table(metrics: dict) -> Table:
         table.add_row(
             a["id"], _fmt(rmse, ".2f"), _fmt(anees, ".2f"), f"{tracked}/{len(a['targets'])}",
             _fmt(max(firsts) if firsts else None, ".1f"), f"{a['bytes_tx'] / duration:,.0f}",
-            str(a["msgs_rejected"]), str(a.get("deadline_misses", "-")),
+            _drops(a.get("radio_drops_by_cause", {})), str(a["msgs_rejected"]), str(a.get("deadline_misses", "-")),
         )
     o, f = metrics["oracle"], metrics["fleet"]
-    table.add_row("oracle", _fmt(o["rmse"], ".2f"), _fmt(o["anees"], ".2f"), "", "", "", "", "", style="dim")
+    table.add_row("oracle", _fmt(o["rmse"], ".2f"), _fmt(o["anees"], ".2f"), "", "", "", "", "", "", style="dim")
     table.add_row("fleet", _fmt(f["rmse"], ".2f"), _fmt(f["anees"], ".2f"),
                   f"ratio {_fmt(f['rmse_ratio_to_oracle'], '.2f')}", "", _fmt(f["bytes_per_agent_per_s"], ",.0f"),
-                  "", "", style="bold")
+                  "", "", "", style="bold")
     return table
+
+
+def _drops(by_cause: dict) -> str:
+    """``12 (loss 9, rate 3)``: radio drops and their causes."""
+    total = sum(by_cause.values())
+    return f"{total} ({', '.join(f'{k} {v}' for k, v in sorted(by_cause.items()))})" if total else "0"
 
 
 def plot(metrics: dict, folder: Path) -> None:
