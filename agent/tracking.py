@@ -17,9 +17,11 @@ decentralized fusion equals the centralized filter exactly.
   detection by ``d^2 = nu^T S^-1 nu``, ``S = H P H^T + R``, gated at ``d^2 <= 9`` (Merino's threshold);
   the assignment minimising the total ``d^2`` is found with the Hungarian method, which for one
   detection per track is Merino's "minimum ``d^2``" rule made globally consistent (crossing targets).
+  Confirmed tracks have the first claim on the detections inside their gates.
 * **Initiation**: a detection outside every gate starts a *tentative* track at the ground point of
   its ray (``perception.geolocation``), with an unscented-transform covariance and a broad velocity
-  prior. A track is confirmed after ``confirm_hits`` updates and is only then shared.
+  prior. A track is confirmed after ``confirm_hits`` updates and is only then shared; one that is
+  confirmed inside the track-to-track gate of another confirmed track is a duplicate and is dropped.
 * **Track-to-track** (Merino (3.65)): a peer's track is matched to the local track minimising
   ``(mu_i - mu_j)^T (P_i + P_j)^-1 (mu_i - mu_j)`` over positions, gated; the match is kept in a
   persistent remote -> local label table. A peer track that matches nothing is adopted as a new track.
@@ -180,7 +182,10 @@ class Tracker:
             track.belief = updated
             track.hits += 1
             track.last_measured = max(track.last_measured, bearing.t)
-            track.confirmed = track.confirmed or track.hits >= self.config.confirm_hits
+            if not track.confirmed and track.hits >= self.config.confirm_hits:
+                track.confirmed = True
+                if not by_label and self._duplicate(track):
+                    self._delete(track.id)
             used.add(b_index)
             counts["updated"] += 1
         for b_index, bearing in enumerate(bearings):
@@ -193,6 +198,19 @@ class Tracker:
             else:
                 counts["unused"] += 1
         return counts
+
+    def _duplicate(self, track: Track) -> bool:
+        """Does a track that has just been confirmed pass the track-to-track gate with another confirmed
+        track? Then it is that target seen twice (started by a run of its detections that fell outside its
+        gate) and is dropped rather than merged: a merge would desynchronize the other's channel filters."""
+        for other in self.tracks.values():
+            if other.id != track.id and other.confirmed:
+                try:
+                    if self._track_distance(other.estimate(), track.estimate()) < self.config.track_gate:
+                        return True
+                except UninformativeBeliefError:
+                    continue
+        return False
 
     def _measure(self, belief: Trajectory, bearing: Bearing) -> Trajectory | None:
         """Apply one detection to a belief, as a bearing or as a geolocated position (``None``: the ray
