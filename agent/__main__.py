@@ -17,7 +17,7 @@ from pathlib import Path
 
 from agent.agent import Agent
 from agent.config import AgentScenario, read_scenario_file
-from agent.runtime import SimClock, install_stop_handlers, run_steps, write_json
+from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
 from agent.transport import Keys, ZenohTransport, load_config
 
 log = logging.getLogger("skymesh.agent")
@@ -38,6 +38,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--fleet-key-file", help="file holding the fleet's HMAC key")
     p.add_argument("--out", default=".", help="folder for agent-<id>.json")
     p.add_argument("--parent-pid", type=int, help="exit when this process (the launcher) is gone")
+    p.add_argument("--epoch-file", help="wait for the launcher to write the start time here (instead of --epoch)")
+    p.add_argument("--ready-file", help="created once this process is ready (with --epoch-file)")
     return p.parse_args(argv)
 
 
@@ -58,9 +60,14 @@ def main(argv=None) -> int:
     agent = Agent(args.id, args.index, scenario, transport, keys, seed=args.seed, fleet_key=key)
     stop = threading.Event()
     install_stop_handlers(stop)
-    clock = SimClock(args.epoch if args.epoch is not None else time.time(), args.speed)
+    epoch = args.epoch if args.epoch is not None else time.time()
+    if args.epoch_file:
+        epoch = wait_for_epoch(args.epoch_file, args.ready_file or f"{args.epoch_file}.{args.id}", stop,
+                               args.parent_pid)
     try:
-        stats = run_steps(agent.step, clock, scenario.step, duration, stop, args.parent_pid)
+        stats = LoopStats() if epoch is None else run_steps(
+            agent.step, SimClock(epoch, args.speed), scenario.step, duration, stop, args.parent_pid
+        )
     finally:
         transport.close()
     metrics = {"pid": os.getpid(), **agent.metrics(), **stats.as_dict(), "transport_dropped": transport.dropped}

@@ -4,10 +4,15 @@ At each evaluation the target is matched to the estimate nearest to it in Mahala
 position, accepted if ``d^2`` is inside ``gate`` (chi-square(3) 99.9 % by default). NEES is the full
 6-D ``(x - mu)^T P^-1 (x - mu)``; ``anees`` is its average divided by the state dimension, so 1.0 is
 perfectly consistent (Bar-Shalom et al., *Estimation with Applications to Tracking*, §5.4).
+
+Each target's summary also has a ``tail``: the same figures over the last ``tail_s`` seconds before the
+newest evaluation only, e.g. to see estimates re-converge after a partition heals, which the whole-run
+figures dilute.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,6 +20,7 @@ import numpy as np
 from fusion.gaussian import Gaussian
 
 MATCH_GATE = 16.27  # chi-square(3) 99.9 %; chosen here
+TAIL_S = 10.0  # s: the final part of a run that is also summarised on its own; chosen here
 
 
 @dataclass
@@ -28,14 +34,18 @@ class _TargetScore:
 class TrackEvaluator:
     """Accumulates per-target scores over a run."""
 
-    def __init__(self, gate: float = MATCH_GATE):
+    def __init__(self, gate: float = MATCH_GATE, tail_s: float = TAIL_S):
         self.gate = gate
+        self.tail_s = tail_s
         self.scores: dict[str, _TargetScore] = {}
         self.t0: float | None = None
+        self._recent: deque = deque()  # (t, target, squared error, nees) of the last tail_s seconds
 
     def record(self, t: float, truth: list[dict], estimates: list[tuple[int, Gaussian]]) -> None:
         """Score the estimates at time ``t`` against the true targets (``{"id", "position", "velocity"}``)."""
         self.t0 = t if self.t0 is None else self.t0
+        while self._recent and self._recent[0][0] < t - self.tail_s - 1e-9:
+            self._recent.popleft()
         for target in truth:
             score = self.scores.setdefault(target["id"], _TargetScore())
             state = np.concatenate([target["position"], target["velocity"]])
@@ -43,24 +53,39 @@ class TrackEvaluator:
             if best is None:
                 continue
             err = best.mean[:3] - state[:3]
+            nees = best.nees(state)
             score.squared_errors += float(err @ err)
-            score.nees += best.nees(state)
+            score.nees += nees
             score.count += 1
+            self._recent.append((t, target["id"], float(err @ err), nees))
             if score.first_track_t is None:
                 score.first_track_t = t - self.t0
 
     def summary(self) -> list[dict]:
-        """``[{"target", "rmse", "anees", "time_to_first_track", "samples"}]`` (None where never tracked)."""
+        """``[{"target", "rmse", "anees", "time_to_first_track", "samples", "tail"}]`` (None where never
+        tracked); ``tail`` is ``{"window_s", "rmse", "anees", "samples"}`` over the last ``tail_s`` seconds."""
+        tails: dict[str, _TargetScore] = {}
+        for _, target, squared_error, nees in self._recent:  # record() keeps only the last tail_s seconds
+            tail = tails.setdefault(target, _TargetScore())
+            tail.squared_errors += squared_error
+            tail.nees += nees
+            tail.count += 1
         out = []
         for target, s in sorted(self.scores.items()):
             out.append({
-                "target": target,
-                "rmse": float(np.sqrt(s.squared_errors / s.count)) if s.count else None,
-                "anees": s.nees / (s.count * 6) if s.count else None,
+                "target": target, **_figures(s),
                 "time_to_first_track": s.first_track_t,
-                "samples": s.count,
+                "tail": {"window_s": self.tail_s, **_figures(tails.get(target, _TargetScore()))},
             })
         return out
+
+
+def _figures(s: _TargetScore) -> dict:
+    return {
+        "rmse": float(np.sqrt(s.squared_errors / s.count)) if s.count else None,
+        "anees": s.nees / (s.count * 6) if s.count else None,
+        "samples": s.count,
+    }
 
 
 def _nearest(state: np.ndarray, estimates: list[tuple[int, Gaussian]], gate: float) -> Gaussian | None:

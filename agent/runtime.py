@@ -41,6 +41,23 @@ class SimClock:
         return self.epoch + t / self.speed
 
 
+def wait_for_epoch(epoch_file: Path, ready_file: Path, stop: threading.Event, parent_pid: int | None,
+                   timeout: float = 120.0) -> float | None:
+    """Say "ready" (create ``ready_file``) and wait for the launcher to publish the start time in
+    ``epoch_file`` once every process is ready — so a slow start on a busy machine costs no steps.
+    Returns ``None`` if stopped, orphaned or timed out first."""
+    Path(ready_file).touch()
+    deadline = time.time() + timeout
+    while not stop.is_set() and time.time() < deadline:
+        if parent_pid is not None and not parent_alive(parent_pid):
+            return None
+        try:
+            return float(Path(epoch_file).read_text())
+        except (OSError, ValueError):
+            stop.wait(0.02)
+    return None
+
+
 def install_stop_handlers(stop: threading.Event) -> None:
     """SIGTERM and SIGINT set ``stop`` instead of killing the process mid-write."""
     for sig in (signal.SIGTERM, signal.SIGINT):

@@ -19,6 +19,13 @@ from fusion.network import bridges
 NEIGHBOUR_TIMEOUT = 3.0  # s without hearing a peer before it stops being a neighbour; chosen here
 
 
+def report_lifetime(timeout: float) -> float:
+    """How long another agent's report stays fresh. It must outlive every listing of that agent as
+    someone's neighbour (a listing lasts ``timeout`` after the agent was last heard, and the report
+    itself may be one gossip hop older), or knowledge turns "incomplete" on links that never changed."""
+    return 2.0 * timeout + 1.0
+
+
 class Topology:
     def __init__(self, me: str, timeout: float = NEIGHBOUR_TIMEOUT):
         self.me = me
@@ -47,13 +54,15 @@ class Topology:
 
     def gossip(self, t: float) -> dict:
         """Every fresh report this agent knows, its own included, for its telemetry."""
-        fresh = {a: [w, sorted(n)] for a, (w, n) in self._reports.items() if t - w <= self.timeout}
+        lifetime = report_lifetime(self.timeout)
+        fresh = {a: [w, sorted(n)] for a, (w, n) in self._reports.items() if t - w <= lifetime}
         fresh[self.me] = [t, self.neighbours(t)]
         return fresh
 
     def is_tree_edge(self, peer: str, t: float) -> bool:
         """True if ``(me, peer)`` is a bridge of the graph known at ``t`` and that knowledge is complete."""
-        reports = {a: n for a, (w, n) in self._reports.items() if t - w <= self.timeout}
+        lifetime = report_lifetime(self.timeout)
+        reports = {a: n for a, (w, n) in self._reports.items() if t - w <= lifetime}
         reports[self.me] = frozenset(self.neighbours(t))
         seen = set(reports) | {n for ns in reports.values() for n in ns}
         if not seen <= set(reports):

@@ -31,8 +31,8 @@ from agent.transport import router_config
 from mesh_sim import results
 from mesh_sim.scenario import Scenario
 
-STARTUP_S = 2.0  # wall seconds given to processes to start before simulation time 0; chosen here
-STARTUP_PER_AGENT_S = 0.15
+START_DELAY_S = 0.5  # wall seconds between "everyone is ready" and simulation time 0; chosen here
+READY_TIMEOUT_S = 120.0  # a process that is not ready by then fails the run
 GRACE_S = 10.0  # wall seconds between SIGTERM and SIGKILL
 
 
@@ -84,17 +84,16 @@ class Launcher:
 
     # -- lifecycle --------------------------------------------------------------------------------
     def run(self) -> RunOutcome:
-        sc = self.scenario.agent
         scenario_file = self.run_dir / "scenario.json"
         scenario_file.write_text(json.dumps(self.scenario.raw, indent=2))
         (self.run_dir / "logs").mkdir(exist_ok=True)
         endpoint = f"tcp/127.0.0.1:{free_port()}"
         router = zenoh.open(router_config([endpoint]))
-        epoch = time.time() + STARTUP_S + STARTUP_PER_AGENT_S * sc.agents
         status = "completed"
         try:
-            self._start_all(scenario_file, endpoint, epoch)
-            status = self._monitor(epoch)
+            self._start_all(scenario_file, endpoint)
+            epoch = self._release()
+            status = self._monitor(epoch) if isinstance(epoch, float) else epoch
         except KeyboardInterrupt:
             status = "interrupted"
         finally:
@@ -103,21 +102,51 @@ class Launcher:
         metrics = results.collect(self.run_dir, self.scenario, status, self.speed)
         return RunOutcome(self.run_dir, status, metrics, {c.name: c.process.pid for c in self.children})
 
-    def _start_all(self, scenario_file: Path, endpoint: str, epoch: float) -> None:
+    @property
+    def _epoch_file(self) -> Path:
+        return self.run_dir / "epoch"
+
+    def _ready_file(self, name: str) -> Path:
+        return self.run_dir / "logs" / f"{name}.ready"
+
+    def _release(self) -> float | str:
+        """Wait until the world and every agent are ready, then publish simulation time 0 (the epoch).
+        Returns the epoch, or the failure status if a child died or never got ready."""
+        timed = [c for c in self.children if c.role != "observer"]
+        deadline = time.time() + READY_TIMEOUT_S
+        while not all(self._ready_file(c.name).exists() for c in timed):
+            for child in self.children:
+                if child.process.poll() is not None:
+                    return f"failed: {child.name} (pid {child.process.pid}) exited with code {child.process.poll()}"
+            if time.time() > deadline:
+                return f"failed: not every process was ready within {READY_TIMEOUT_S:.0f} s"
+            time.sleep(0.05)
+        epoch = time.time() + START_DELAY_S
+        tmp = self._epoch_file.with_suffix(".tmp")
+        tmp.write_text(repr(epoch))
+        os.replace(tmp, self._epoch_file)
+        return epoch
+
+    def _start_all(self, scenario_file: Path, endpoint: str) -> None:
         sc = self.scenario.agent
         common = ["--fleet", self.fleet, "--connect", endpoint, "--parent-pid", str(os.getpid())]
-        timing = ["--epoch", repr(epoch), "--speed", repr(self.speed)]
+
+        def timing(name: str) -> list[str]:
+            return ["--epoch-file", str(self._epoch_file), "--ready-file", str(self._ready_file(name)),
+                    "--speed", repr(self.speed)]
+
         if self.rerun != "off":
             view = {"save": ["--save", str(self.run_dir / "recording.rrd")], "spawn": ["--spawn"]}.get(
                 self.rerun, ["--connect-viewer", self.rerun.removeprefix("connect:")]
             )
             self._spawn("observer", "observer", ["-m", "mesh_sim.observer", *common, *view])
-        self._spawn("world", "world", ["-m", "mesh_sim.world", *common, *timing, "--scenario", str(scenario_file),
+        self._spawn("world", "world", ["-m", "mesh_sim.world", *common, *timing("world"),
+                                       "--scenario", str(scenario_file),
                                        "--duration", repr(sc.duration), "--out", str(self.run_dir)])
         for i in range(sc.agents):
             self._spawn(f"uav{i}", "agent", [
                 "-m", "agent", "--id", f"uav{i}", "--index", str(i), "--scenario", str(scenario_file),
-                "--seed", str(sc.seed * 1000 + i), "--out", str(self.run_dir), *common, *timing,
+                "--seed", str(sc.seed * 1000 + i), "--out", str(self.run_dir), *common, *timing(f"uav{i}"),
             ])
 
     def _spawn(self, name: str, role: str, args: list[str]) -> None:

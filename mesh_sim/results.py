@@ -2,7 +2,8 @@
 
 Fleet figures pool every (agent, target) pair by samples: ``rmse = sqrt(sum n_i rmse_i^2 / sum n_i)``
 and ``anees = sum n_i anees_i / sum n_i``, likewise for the oracle, so ``rmse_ratio_to_oracle`` compares
-like with like.
+like with like. ``tail_rmse`` and ``tail_anees`` pool the targets' ``tail`` figures (the final
+``agent.evaluation.TAIL_S`` seconds of the run) the same way.
 """
 
 from __future__ import annotations
@@ -44,14 +45,19 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
     all_targets = [t for a in agents for t in a.get("targets", [])]
     rmse, anees = pooled(all_targets)
     oracle_rmse, oracle_anees = pooled(oracle.get("targets", []))
+    tail_rmse, tail_anees = pooled(_tails(all_targets))
+    oracle_tail_rmse, oracle_tail_anees = pooled(_tails(oracle.get("targets", [])))
     tx = [a["bytes_tx"] for a in agents if "bytes_tx" in a]
     metrics = {
         "status": status,
         "agents": agents,
-        "oracle": {**oracle, "rmse": oracle_rmse, "anees": oracle_anees},
+        "oracle": {**oracle, "rmse": oracle_rmse, "anees": oracle_anees, "tail_rmse": oracle_tail_rmse,
+                   "tail_anees": oracle_tail_anees},
         "fleet": {
             "rmse": rmse,
             "anees": anees,
+            "tail_rmse": tail_rmse,
+            "tail_anees": tail_anees,
             "rmse_ratio_to_oracle": rmse / oracle_rmse if rmse is not None and oracle_rmse else None,
             "bytes_per_agent_per_s": float(np.mean(tx)) / sc.duration if tx else None,
             "targets_tracked_by_every_agent": _tracked_by_all(agents, scenario),
@@ -64,6 +70,10 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
     except (OSError, ValueError) as err:  # a plot is a convenience; the metrics are already written
         Console(stderr=True).print(f"[yellow]plots skipped: {err}")
     return metrics
+
+
+def _tails(targets: list[dict]) -> list[dict]:
+    return [t["tail"] for t in targets if isinstance(t.get("tail"), dict)]
 
 
 def _tracked_by_all(agents: list[dict], scenario) -> bool:

@@ -20,7 +20,7 @@ import numpy as np
 from agent import wire
 from agent.agent import FUTURE_EPOCHS
 from agent.evaluation import TrackEvaluator
-from agent.runtime import SimClock, install_stop_handlers, run_steps, write_json
+from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
 from agent.sensing import Bearing
 from agent.tracking import Tracker
 from agent.transport import Keys, ZenohTransport, load_config
@@ -42,8 +42,9 @@ class Oracle:
         self.late = 0
         self.rejected = 0
 
-    def add(self, env: wire.Envelope) -> None:
-        """Apply one agent's bearings at the epoch they were taken."""
+    def add(self, env: wire.Envelope, now: float) -> None:
+        """Apply one agent's bearings at the epoch they were taken (``now``: the world's simulation time;
+        bearings stamped far after it are a clock fault and rejected)."""
         try:
             bearings = [
                 Bearing(env.stamp, np.asarray(b["sensor"], float), np.asarray(b["azel"], float),
@@ -54,7 +55,7 @@ class Oracle:
             self.rejected += 1
             return
         epoch = self.tracker.model.epoch_of(env.stamp)
-        if epoch > self.tracker.epoch + FUTURE_EPOCHS:
+        if epoch > self.tracker.model.epoch_of(now) + FUTURE_EPOCHS:
             self.rejected += 1
             return
         if epoch > self.tracker.epoch:
@@ -79,12 +80,14 @@ class World:
         self.oracle = Oracle(scenario.agent)
         self.seq = 0
         self.uavs: dict[str, list] = {}  # agent -> last reported position (the radio's range check uses it)
+        self.now = 0.0
 
     @staticmethod
     def subscriptions(keys: Keys) -> list[str]:
         return [keys.sim("measurement/*"), keys.telemetry("*")]
 
     def publish_truth(self, t: float) -> None:
+        self.now = t
         self.seq += 1
         env = wire.Envelope(kind="truth", origin="world", seq=self.seq, stamp=t,
                             payload={"targets": truth_snapshot(self.scenario.targets, t), "uavs": dict(self.uavs)})
@@ -101,7 +104,7 @@ class World:
             if env.kind == "telemetry":
                 self._note_position(env)
             else:
-                self.oracle.add(env)
+                self.oracle.add(env, self.now)
         self.oracle.evaluate(self.scenario.targets)
 
     def _note_position(self, env: wire.Envelope) -> None:
@@ -125,11 +128,13 @@ def main(argv=None) -> int:
     p.add_argument("--scenario", required=True)
     p.add_argument("--connect", action="append", default=[])
     p.add_argument("--zenoh-config")
-    p.add_argument("--epoch", type=float, required=True)
+    p.add_argument("--epoch", type=float, help="wall time of simulation t=0")
     p.add_argument("--speed", type=float, default=1.0)
     p.add_argument("--duration", type=float, required=True)
     p.add_argument("--out", default=".")
     p.add_argument("--parent-pid", type=int, help="exit when this process (the launcher) is gone")
+    p.add_argument("--epoch-file", help="wait for the launcher to write the start time here (instead of --epoch)")
+    p.add_argument("--ready-file", help="created once this process is ready (with --epoch-file)")
     args = p.parse_args(argv)
     try:
         scenario = load(args.scenario)
@@ -142,10 +147,14 @@ def main(argv=None) -> int:
     world = World(scenario, transport, keys)
     stop = threading.Event()
     install_stop_handlers(stop)
-    clock = SimClock(args.epoch, args.speed)
+    epoch = args.epoch if args.epoch is not None else time.time()
+    if args.epoch_file:
+        epoch = wait_for_epoch(args.epoch_file, args.ready_file or f"{args.epoch_file}.world", stop, args.parent_pid)
     started = time.time()
     try:
-        stats = run_steps(world.tick, clock, 1.0 / TRUTH_RATE_HZ, args.duration + 1.0, stop, args.parent_pid)
+        stats = LoopStats() if epoch is None else run_steps(
+            world.tick, SimClock(epoch, args.speed), 1.0 / TRUTH_RATE_HZ, args.duration + 1.0, stop, args.parent_pid
+        )
     finally:
         transport.close()
     write_json(Path(args.out) / "oracle.json", {**world.summary(), "wall_s": time.time() - started, **stats.as_dict()})
