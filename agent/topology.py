@@ -32,6 +32,7 @@ class Topology:
         self.timeout = timeout
         self._heard: dict[str, float] = {}  # peer -> last time heard
         self._reports: dict[str, tuple[float, frozenset[str]]] = {}  # agent -> (report time, its neighbours)
+        self._cache: tuple[frozenset, frozenset] | None = None  # (known graph, its bridges): graphs change rarely
 
     def heard(self, peer: str, t: float) -> None:
         self._heard[peer] = max(t, self._heard.get(peer, t))
@@ -67,7 +68,10 @@ class Topology:
         seen = set(reports) | {n for ns in reports.values() for n in ns}
         if not seen <= set(reports):
             return False
-        names = sorted(seen)
-        index = {name: i for i, name in enumerate(names)}
-        edges = {frozenset((index[a], index[n])) for a, ns in reports.items() for n in ns if n != a}
-        return peer in index and frozenset((index[self.me], index[peer])) in bridges(len(names), edges)
+        graph = frozenset(frozenset((a, n)) for a, ns in reports.items() for n in ns if n != a)
+        if self._cache is None or self._cache[0] != graph:
+            names = sorted(seen)
+            index = {name: i for i, name in enumerate(names)}
+            found = bridges(len(names), [tuple(index[x] for x in e) for e in graph])
+            self._cache = (graph, frozenset(frozenset(names[i] for i in e) for e in found))
+        return frozenset((self.me, peer)) in self._cache[1]

@@ -18,30 +18,43 @@ from fusion.channel_filter import ChannelFilter, Policy
 
 
 def bridges(n: int, edges: Iterable[tuple[int, int]]) -> set[frozenset]:
-    """The edges whose removal disconnects the graph: exactly the edges that lie on no loop."""
-    edges = [frozenset(e) for e in edges]
-    result = set()
-    for edge in edges:
-        rest = [e for e in edges if e != edge]
-        if not _connected(n, rest, *tuple(edge)):
-            result.add(edge)
+    """The edges whose removal disconnects the graph: exactly the edges that lie on no loop.
+
+    Tarjan's bridge-finding algorithm (1974), O(V + E): in a depth-first search, tree edge (u, v) is a
+    bridge iff no vertex in v's subtree reaches u or above by a back edge, i.e. ``low[v] > disc[u]``.
+    Iterative, so deep graphs do not hit Python's recursion limit; parallel edges are not bridges."""
+    adjacency: dict[int, list[tuple[int, int]]] = {i: [] for i in range(n)}
+    for index, (u, v) in enumerate(tuple(e) for e in edges):
+        adjacency[u].append((v, index))
+        adjacency[v].append((u, index))
+    disc, low = [-1] * n, [0] * n
+    result: set[frozenset] = set()
+    clock = 0
+    for root in range(n):
+        if disc[root] >= 0:
+            continue
+        disc[root] = low[root] = clock
+        clock += 1
+        stack = [(root, -1, iter(adjacency[root]))]  # (vertex, index of the edge we came by, neighbours left)
+        while stack:
+            u, via, neighbours = stack[-1]
+            for v, index in neighbours:
+                if index == via:
+                    continue
+                if disc[v] < 0:
+                    disc[v] = low[v] = clock
+                    clock += 1
+                    stack.append((v, index, iter(adjacency[v])))
+                    break
+                low[u] = min(low[u], disc[v])
+            else:
+                stack.pop()
+                if stack:
+                    parent = stack[-1][0]
+                    low[parent] = min(low[parent], low[u])
+                    if low[u] > disc[parent]:
+                        result.add(frozenset((parent, u)))
     return result
-
-
-def _connected(n: int, edges: list[frozenset], a: int, b: int) -> bool:
-    adj: dict[int, list[int]] = {i: [] for i in range(n)}
-    for e in edges:
-        u, v = tuple(e)
-        adj[u].append(v)
-        adj[v].append(u)
-    seen, frontier = {a}, [a]
-    while frontier:
-        u = frontier.pop()
-        for v in adj[u]:
-            if v not in seen:
-                seen.add(v)
-                frontier.append(v)
-    return b in seen
 
 
 class FilterNetwork:

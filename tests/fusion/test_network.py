@@ -266,3 +266,29 @@ def test_loop_that_breaks_into_a_tree_stays_consistent():
     upper = _anees_upper(runs, 3)
     assert (np.mean(nees_loop, axis=0) / 3).max() < upper
     assert (np.mean(nees_tree, axis=0) / 3).max() < upper
+
+
+def _brute_force_bridges(n, edges):
+    """Independent oracle: an edge is a bridge iff removing it disconnects its two ends."""
+    def connected(es, a, b):
+        seen, frontier = {a}, [a]
+        while frontier:
+            u = frontier.pop()
+            for x, y in es:
+                for p, q in ((x, y), (y, x)):
+                    if p == u and q not in seen:
+                        seen.add(q)
+                        frontier.append(q)
+        return b in seen
+
+    return {frozenset(e) for i, e in enumerate(edges) if not connected(edges[:i] + edges[i + 1:], *e)}
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_bridges_match_brute_force_on_random_graphs(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 14))
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    keep = rng.random(len(pairs)) < rng.uniform(0.1, 0.6)
+    edges = [p for p, k in zip(pairs, keep, strict=True) if k]
+    assert bridges(n, edges) == _brute_force_bridges(n, edges)
