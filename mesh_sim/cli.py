@@ -4,8 +4,10 @@
   and print its tables (optionally writing the result as JSON);
 * ``skymesh bench --list`` — list the benchmarks;
 * ``skymesh run [--scenario NAME|FILE] [--agents N] [--duration S] [--speed X] [--seed K] [--out DIR]
-  [--policy P] [--rerun save|spawn|connect:URL|off]`` — a team of agent processes over Zenoh
-  (``mesh_sim.launcher``); with no arguments, the default scenario;
+  [--policy P] [--rerun save|spawn|connect:URL|off] [--camera uavK=SOURCE ...]`` — a team of agent processes
+  over Zenoh (``mesh_sim.launcher``); with no arguments, the default scenario. ``--camera uav0=clip.avi``
+  replaces that agent's synthetic camera with an OpenCV video source (file, device index, stream URL);
+  a source that cannot be opened is a usage error before anything starts;
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
 * ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``).
 
@@ -63,6 +65,15 @@ def build_parser() -> argparse.ArgumentParser:
         run.add_argument("--rerun", default="save", help="save (default), spawn, connect:URL or off")
         run.add_argument("--lockstep", action="store_true",
                          help="all agents in this process over an in-memory bus, deterministic and fast")
+        run.add_argument("--camera", action="append", default=[], metavar="AGENT=SOURCE",
+                         help="replace an agent's synthetic camera with an OpenCV source (file, device index, URL), "
+                              "e.g. uav0=clip.avi; repeatable")
+
+    stress = commands.add_parser("stress", help="bandwidth and topology stress (= skymesh bench stress)",
+                                 description="Live runs under topology churn with a shrinking bandwidth cap.")
+    stress.add_argument("--quick", action="store_true")
+    stress.add_argument("--json", metavar="PATH", type=Path)
+    stress.add_argument("--repeats", type=_positive_int, help=argparse.SUPPRESS)
 
     view = commands.add_parser("view", help="the ground station: log a fleet to Rerun",
                                description="Subscribe to a fleet on Zenoh and log it to Rerun.")
@@ -119,13 +130,15 @@ def _run(args) -> int:
         overrides["radio"] = radio
     try:
         scenario = load(args.scenario, **overrides)
+        cameras = _cameras(args.camera, scenario.agent.agents)
         run_dir = new_run_dir(args.out, scenario.name)
         if args.lockstep:
             if args.rerun not in ("save", "off"):
                 raise ValueError("--lockstep records with --rerun save or off")
-            metrics, status = run_lockstep(scenario, run_dir, rerun=args.rerun), "completed"
+            metrics, status = run_lockstep(scenario, run_dir, rerun=args.rerun, cameras=cameras), "completed"
         else:
-            outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console).run()
+            outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console,
+                               cameras=cameras).run()
             metrics, status = outcome.metrics, outcome.status
     except (ValueError, OSError) as err:
         print(f"skymesh run: {err}", file=sys.stderr)
@@ -138,6 +151,28 @@ def _run(args) -> int:
     if status == "interrupted":
         return 130
     return 0 if status == "completed" else 1
+
+
+def _cameras(specs: list[str], agents: int) -> dict[str, str]:
+    """``["uav0=clip.avi", ...]`` -> ``{"uav0": "clip.avi"}``, each source checked to open (then released)."""
+    from agent.camera_sensor import VideoSource
+
+    cameras: dict[str, str] = {}
+    names = {f"uav{i}" for i in range(agents)}
+    for spec in specs:
+        name, sep, source = spec.partition("=")
+        if not sep or not source:
+            raise ValueError(f"--camera {spec!r}: expected AGENT=SOURCE, e.g. uav0=clip.avi")
+        if name not in names:
+            raise ValueError(f"--camera {spec!r}: no agent {name!r} in this run (agents are uav0..uav{agents - 1})")
+        if name in cameras:
+            raise ValueError(f"--camera: {name} is given twice")
+        try:
+            VideoSource(source).close()
+        except ValueError as err:
+            raise ValueError(f"--camera {name}: {err}") from None
+        cameras[name] = source
+    return cameras
 
 
 def _view(args) -> int:
@@ -162,6 +197,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _bench(args)
     if args.command == "view":
         return _view(args)
+    if args.command == "stress":
+        args.name, args.list = "stress", False
+        return _bench(args)
     return _run(args)
 
 
