@@ -1,31 +1,21 @@
-"""Measured detection / false-alarm rates and timings of the synthetic camera and the detectors.
+"""Measured detection / false-alarm rates of the synthetic camera and the detectors.
 
-``python -m perception.detector_bench [--frames 60] [--width 640 --height 480] [--repeat 100]``
-prints three tables: target detection per detector and condition (clean, banding in half the
-frames, transient speckles, three kinds of failed camera) with the video-quality D(t); per-pixel
-fire segmentation (thermal threshold, visual histogram trained on other frames); and milliseconds
-per frame at 320×240 and 640×480 with OpenCV's default thread count and with one thread.
+``python -m perception.detector_bench [--frames 60] [--width 640 --height 480]`` prints two tables:
+target detection per detector and condition (clean, banding in half the frames, transient speckles,
+three kinds of failed camera) with the video-quality D(t); and per-pixel fire segmentation (thermal
+threshold, visual histogram trained on other frames).
+
+Milliseconds per frame of the renderer, these detectors and geolocation, at 320×240 and 640×480 with
+one OpenCV thread and with the default count, are measured by ``skymesh bench perception``
+(:mod:`mesh_sim.bench.perception`), which replaced the timing table that used to be printed here.
 """
 
 from __future__ import annotations
 
-import math
-import time
 from collections.abc import Sequence
 
 from perception.degradation import Degradation
 from perception.evaluation import detection_rates, segmentation_rates, sequence
-from perception.pinhole import PinholeView
-from perception.render import Fire, Target, default_ground, render_frame
-
-
-def _timed(fn, repeat: int) -> float:
-    fn()
-    t0 = time.perf_counter()
-    for _ in range(repeat):
-        fn()
-    return (time.perf_counter() - t0) / repeat * 1e3
-
 
 CONDITIONS = {
     "clean": Degradation(),
@@ -101,65 +91,15 @@ def _fire_rows(n_frames: int, width: int, height: int) -> list[tuple]:
     return rows
 
 
-def _timing_jobs(width: int, height: int) -> dict:
-    """The timed operations at one image size (each a no-argument callable)."""
-    from perception.blobs import ColorBlobDetector, DarkBlobDetector
-    from perception.fire_segmentation import FireSegmenter
-    from perception.persistence import PersistentDetector
-    from perception.quality import VideoQuality
-
-    frames = sequence(4, width, height, "terrain", target_rgb=(210, 25, 30), n_fires=2, seed=1)
-    view = PinholeView.look_at((0.0, 0.0, -30.0), (0.0, 0.0, 0.0), width, height, math.radians(60.0))
-    targets = [Target((1.0, 2.0, -0.5), 0.5, (210, 25, 30)), Target((-3.0, 1.0, -0.5), 0.5, (30, 30, 30))]
-    fires = [Fire((4.0, -3.0), 4.0, 800.0)]
-    ground = default_ground()
-    banding = Degradation(banding_prob=1.0)
-    seg = FireSegmenter("histogram").fit([f.rgb for f in frames], [f.fire_mask for f in frames])
-    rgb, th = frames[0].rgb, frames[0].thermal
-    persistent, quality = PersistentDetector(DarkBlobDetector()), VideoQuality()
-
-    def render(**kw):
-        return render_frame(view, width, height, targets, fires, ground=ground, **kw)
-
-    return {
-        "render RGB": lambda: render(thermal=False),
-        "render thermal": lambda: render(rgb=False),
-        "render RGB + thermal": render,
-        "render RGB + thermal, banding": lambda: render(degradation=banding),
-        "ColorBlobDetector": lambda: ColorBlobDetector().detect(rgb),
-        "DarkBlobDetector": lambda: DarkBlobDetector().detect(rgb),
-        "PersistentDetector(DarkBlob)": lambda: persistent.detect(rgb),
-        "VideoQuality.update": lambda: quality.update(rgb),
-        "FireSegmenter threshold": lambda: FireSegmenter("threshold").segment(th),
-        "FireSegmenter histogram": lambda: seg.segment(rgb),
-    }
-
-
-def _timing_rows(repeat: int = 100) -> list[tuple]:
-    import cv2
-
-    rows = []
-    for width, height in ((320, 240), (640, 480)):
-        jobs = _timing_jobs(width, height)
-        for threads in (cv2.getNumThreads(), 1):
-            saved = cv2.getNumThreads()
-            cv2.setNumThreads(threads)
-            try:
-                for name, job in jobs.items():
-                    rows.append((f"{width}x{height}", name, threads, _timed(job, repeat)))
-            finally:
-                cv2.setNumThreads(saved)
-    return rows
-
-
 def main(argv: Sequence[str] | None = None) -> None:
     import argparse
 
-    parser = argparse.ArgumentParser(description="Measured rates and timings of the synthetic camera and detectors")
+    parser = argparse.ArgumentParser(
+        description="Measured detection and fire-segmentation rates of the synthetic camera and detectors"
+    )
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--width", type=int, default=640)
     parser.add_argument("--height", type=int, default=480)
-    parser.add_argument("--repeat", type=int, default=100)
     args = parser.parse_args(argv)
     print(
         f"Target detection, {args.frames} frames per row, {args.width}x{args.height}, match radius "
@@ -175,9 +115,6 @@ def main(argv: Sequence[str] | None = None) -> None:
     print(f"{'segmenter':20s} {'condition':18s} {'P_D':>6s} {'P_F':>8s} {'IoU':>6s} {'observed':>8s}")
     for name, cond, p_d, p_f, iou, observed in _fire_rows(args.frames, args.width, args.height):
         print(f"{name:20s} {cond:18s} {p_d:6.3f} {p_f:8.4f} {iou:6.3f} {observed:8.3f}")
-    print("\nTime per frame (ms)")
-    for size, name, threads, ms in _timing_rows(args.repeat):
-        print(f"{size:8s} {name:32s} threads={threads}  {ms:7.2f}")
 
 
 if __name__ == "__main__":

@@ -55,6 +55,16 @@ BENCHMARKS: dict[str, Benchmark] = {
             "per-hop round trip and throughput of the agent transport (Zenoh + wire format) vs bare Zenoh pub/sub",
         ),
         Benchmark(
+            "perception",
+            "mesh_sim.bench.perception",
+            "ms per frame for render, detect and geolocate at 320x240 and 640x480; agents per core at 5 Hz",
+        ),
+        Benchmark(
+            "coop-vs-single",
+            "mesh_sim.bench.coop_vs_single",
+            "thesis 000 Table 3.1: spread of the target estimate from one observer vs two cooperating observers",
+        ),
+        Benchmark(
             "rumor",
             "mesh_sim.bench.rumor",
             "lockstep Monte Carlo over topology x loss x policy: RMSE ratio to the oracle, ANEES, bytes per agent",

@@ -1,0 +1,315 @@
+"""``skymesh bench perception``: milliseconds per frame of the synthetic camera, the detectors and geolocation.
+
+The budget that decides how many agents fit on a core. At 320×240 and 640×480 (the thesis 000 §2.2
+raw and processed sizes), every operation timed in the same run, interleaved (see
+:mod:`mesh_sim.bench.common`), median over repeats:
+
+* **render** (:func:`perception.render.render_frame`): RGB only, thermal only, both, and both with
+  banding noise (a degraded link), of a nadir view from 30 m over the shared procedural terrain with two
+  balls and a fire cell;
+* **detect**: colour blobs (:class:`~perception.blobs.ColorBlobDetector`, Ross et al.), dark blobs
+  (:class:`~perception.blobs.DarkBlobDetector`, thesis 000 §2.2) alone and followed by the persistent
+  object filter (:class:`~perception.persistence.PersistentDetector`, §2.3), the video-quality estimate
+  (:class:`~perception.quality.VideoQuality`, §2.4), fire segmentation of the thermal frame (threshold)
+  and of the RGB frame (colour histogram, :class:`~perception.fire_segmentation.FireSegmenter`);
+* **geolocate** one pixel of a camera 80 m up, looking 60° below the horizon: pixel -> ground
+  (:func:`perception.projection.pixel_to_ground`) on flat terrain and on a 30 m grid DEM
+  (:class:`perception.dem.GridTerrain`, Ross et al. use a 30 m USGS DEM), and the unscented-transform
+  geolocation of one detection with its covariance on that DEM (:func:`perception.geolocation.geolocate`,
+  what an agent does to start a track or in ``measurement = "position"`` mode).
+
+Baseline, measured in the same run on the same RGB frame: a bare OpenCV operation of comparable size,
+``cv2.cvtColor(RGB -> gray)`` + ``cv2.threshold``; every operation is also given as a ratio to it.
+
+OpenCV runs with **one thread** for the per-core budget (``cv2.setNumThreads(1)``, restored afterwards);
+each operation is timed again with OpenCV's default thread count for reference.
+
+**Agent step** (one frame of one simulated agent): render RGB + thermal, colour blobs, dark blobs +
+persistence, video quality, fire (thermal) and fire (visual), and the UT geolocation of one detection.
+*Agents per core at 5 Hz* = ``floor(200 ms / step ms)``; *perception only* drops the rendering (a real
+agent gets its frames from a camera). Goal (chosen here): at least one simulated agent per core at the
+agent rate at each size.
+
+Paper figures: Ross et al. (spec 002 §4.3) report 0.086 s on average per target-geolocation run at 4 Hz
+on the onboard ReadyBoard (with the planner sharing the CPU); thesis 000 gives no processing times.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from mesh_sim.bench import common
+
+NAME = "perception"
+SIZES = ((320, 240), (640, 480))
+AGENT_RATE_HZ = 5.0  # DESIGN.md §4, mesh_sim/scenarios/default.toml rate_hz
+PAPER_GEOLOCATION_MS = 86.0  # Ross et al. Sec. VI.D (spec 002 §4.3): mean time per geolocation run
+ALTITUDE_M = 80.0  # geolocation scene: the default scenario's flight altitude
+TILT_DEG = -60.0  # geolocation scene: gimbal tilt (0 = forward, -90 = nadir); chosen here
+DEM_CELL_M = 30.0  # Ross et al.: a USGS DEM (30 m grid)
+BEARING_SIGMA_DEG = 1.0  # agent.sensing.BearingSensorConfig default line-of-sight noise
+
+
+@dataclass(frozen=True)
+class Op:
+    key: str
+    label: str
+    group: str  # "baseline", "render", "detect" or "geolocate"
+    in_step: bool  # part of the agent step
+
+
+OPS = [
+    Op("baseline", "cv2 cvtColor + threshold", "baseline", False),
+    Op("render_rgb", "render RGB", "render", False),
+    Op("render_thermal", "render thermal", "render", False),
+    Op("render_both", "render RGB + thermal", "render", True),
+    Op("render_banding", "render RGB + thermal, banding", "render", False),
+    Op("colour_blobs", "colour blobs (HSV)", "detect", True),
+    Op("dark_blobs", "dark blobs", "detect", False),
+    Op("dark_persistent", "dark blobs + persistence", "detect", True),
+    Op("video_quality", "video quality D(t)", "detect", True),
+    Op("fire_thermal", "fire, thermal threshold", "detect", True),
+    Op("fire_visual", "fire, visual histogram", "detect", True),
+    Op("geo_flat", "pixel -> ground, flat", "geolocate", False),
+    Op("geo_dem", "pixel -> ground, grid DEM", "geolocate", False),
+    Op("geo_ut", "UT geolocation of a detection (DEM)", "geolocate", True),
+]
+OP_BY_KEY = {op.key: op for op in OPS}
+RENDER_KEYS = ("render_both",)
+
+
+def jobs(width: int, height: int) -> dict[str, Callable[[], object]]:
+    """The timed operations at one image size (key -> no-argument callable), built once per size."""
+    import cv2
+
+    from fusion.measurement import los_to_azel
+    from perception.blobs import ColorBlobDetector, DarkBlobDetector
+    from perception.camera import Intrinsics
+    from perception.degradation import Degradation
+    from perception.dem import GridTerrain
+    from perception.evaluation import sequence
+    from perception.fire_segmentation import FireSegmenter
+    from perception.geolocation import geolocate
+    from perception.persistence import PersistentDetector
+    from perception.pinhole import PinholeView
+    from perception.pose import CameraPose, Gimbal
+    from perception.projection import pixel_to_ground, pixel_to_ray_world
+    from perception.quality import VideoQuality
+    from perception.render import Fire, Target, default_ground, render_frame
+    from perception.terrain import FlatTerrain, HillsTerrain
+
+    frames = sequence(4, width, height, "terrain", target_rgb=(210, 25, 30), n_fires=2, seed=1)
+    view = PinholeView.look_at((0.0, 0.0, -30.0), (0.0, 0.0, 0.0), width, height, math.radians(60.0))
+    targets = [Target((1.0, 2.0, -0.5), 0.5, (210, 25, 30)), Target((-3.0, 1.0, -0.5), 0.5, (30, 30, 30))]
+    fires = [Fire((4.0, -3.0), 4.0, 800.0)]
+    ground = default_ground()
+    banding = Degradation(banding_prob=1.0)
+    visual = FireSegmenter("histogram").fit([f.rgb for f in frames], [f.fire_mask for f in frames])
+    thermal = FireSegmenter("threshold")
+    rgb, th = frames[0].rgb, frames[0].thermal
+    colour, dark = ColorBlobDetector(), DarkBlobDetector()
+    persistent, quality = PersistentDetector(DarkBlobDetector()), VideoQuality()
+
+    def render(**kw):
+        return render_frame(view, width, height, targets, fires, ground=ground, **kw)
+
+    def baseline():
+        gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+        return cv2.threshold(gray, 128, 255, cv2.THRESH_BINARY)
+
+    # geolocation: a camera 80 m up over hills, one detection right of and below the image centre
+    intrinsics = Intrinsics.from_fov(width, height, 60.0)
+    pose = CameraPose.from_vehicle([0.0, 0.0, -ALTITUDE_M], 0.02, -0.03, 0.3, Gimbal(0.0, math.radians(TILT_DEG)))
+    pixel = np.array([0.6 * width, 0.55 * height])
+    flat = FlatTerrain(0.0)
+    dem = GridTerrain.sample(HillsTerrain(20.0, 300.0, seed=1), -1500.0, -1500.0, DEM_CELL_M, (101, 101))
+    los = pixel_to_ray_world(pose, intrinsics, pixel)
+    azel = los_to_azel(los)
+    sigma = math.radians(BEARING_SIGMA_DEG)
+    R_azel = np.diag([(sigma / max(abs(math.cos(azel[1])), 1e-3)) ** 2, sigma**2])  # agent.sensing.bearing_covariance
+    for terrain in (flat, dem):
+        if pixel_to_ground(pose, intrinsics, terrain, pixel) is None:
+            raise RuntimeError("geolocation scene: the pixel's ray misses the terrain")
+    if geolocate(pose.centre, azel, R_azel, dem) is None:
+        raise RuntimeError("geolocation scene: the UT geolocation missed the DEM")
+
+    table = {
+        "baseline": baseline,
+        "render_rgb": lambda: render(thermal=False),
+        "render_thermal": lambda: render(rgb=False),
+        "render_both": render,
+        "render_banding": lambda: render(degradation=banding),
+        "colour_blobs": lambda: colour.detect(rgb),
+        "dark_blobs": lambda: dark.detect(rgb),
+        "dark_persistent": lambda: persistent.detect(rgb),
+        "video_quality": lambda: quality.update(rgb),
+        "fire_thermal": lambda: thermal.segment(th),
+        "fire_visual": lambda: visual.segment(rgb),
+        "geo_flat": lambda: pixel_to_ground(pose, intrinsics, flat, pixel),
+        "geo_dem": lambda: pixel_to_ground(pose, intrinsics, dem, pixel),
+        "geo_ut": lambda: geolocate(pose.centre, azel, R_azel, dem),
+    }
+    assert list(table) == [op.key for op in OPS]
+    return table
+
+
+def _check_sizes(sizes) -> tuple[tuple[int, int], ...]:
+    out = []
+    for size in sizes:
+        try:
+            w, h = (int(v) for v in size)
+        except (TypeError, ValueError):
+            raise ValueError(f"sizes must be (width, height) pairs, got {size!r}") from None
+        if w < 32 or h < 24:
+            raise ValueError(f"image size must be at least 32x24, got {w}x{h}")
+        out.append((w, h))
+    if not out:
+        raise ValueError("sizes must not be empty")
+    return tuple(out)
+
+
+def run(
+    quick: bool = False,
+    repeats: int | None = None,
+    *,
+    sizes: Sequence[tuple[int, int]] | None = None,
+    default_threads: bool = True,
+) -> dict:
+    """Run the benchmark; returns ``{"benchmark", "settings", "environment", "rows", "steps", "goals"}``.
+
+    ``sizes`` (keyword-only, for tests) replaces the image sizes; ``default_threads=False`` skips the
+    reference timings with OpenCV's default thread count."""
+    import cv2
+
+    settings = common.Settings.create(quick, repeats)
+    sizes = _check_sizes(SIZES if sizes is None else sizes)
+    saved = cv2.getNumThreads()
+    thread_modes = [1] + ([saved] if default_threads and saved != 1 else [])
+    rows = []
+    try:
+        with common.progress(len(sizes) * len(thread_modes), NAME) as advance:
+            for width, height in sizes:
+                table = jobs(width, height)
+                for threads in thread_modes:
+                    advance(f"{width}x{height}, {threads} thread(s)")
+                    cv2.setNumThreads(threads)
+                    timings = common.time_calls(table, settings)
+                    base = timings["baseline"].median_us
+                    for op in OPS:
+                        t = timings[op.key]
+                        rows.append({
+                            "size": f"{width}x{height}", "width": width, "height": height, "threads": threads,
+                            "op": op.key, "label": op.label, "group": op.group, "in_step": op.in_step,
+                            "ms": t.median_us / 1e3, "best_ms": t.best_us / 1e3,
+                            "ratio_to_baseline": t.median_us / base, "repeats": t.repeats, "number": t.number,
+                        })
+    finally:
+        cv2.setNumThreads(saved)
+    steps = _steps(rows, sizes)
+    goals = {
+        "one_agent_per_core": {
+            "description": f"at least one simulated agent (render + perceive) per core at {AGENT_RATE_HZ:g} Hz",
+            "results": [{"size": s["size"], "agents_per_core": s["agents_per_core"], "pass": s["agents_per_core"] >= 1}
+                        for s in steps],
+        }
+    }
+    goals["one_agent_per_core"]["pass"] = all(r["pass"] for r in goals["one_agent_per_core"]["results"])
+    return {
+        "benchmark": NAME,
+        "settings": {"quick": settings.quick, "repeats": settings.repeats, "min_time_s": settings.min_time,
+                     "sizes": [f"{w}x{h}" for w, h in sizes], "threads": thread_modes,
+                     "agent_rate_hz": AGENT_RATE_HZ, "step_ops": [op.key for op in OPS if op.in_step]},
+        "environment": common.environment(("numpy", "scipy", "opencv-python-headless")),
+        "rows": rows,
+        "steps": steps,
+        "goals": goals,
+    }
+
+
+def _steps(rows: list[dict], sizes) -> list[dict]:
+    """The agent-step budget per size, from the one-thread timings."""
+    budget_ms = 1e3 / AGENT_RATE_HZ
+    out = []
+    for width, height in sizes:
+        size = f"{width}x{height}"
+        ms = {r["op"]: r["ms"] for r in rows if r["size"] == size and r["threads"] == 1}
+        step = sum(ms[op.key] for op in OPS if op.in_step)
+        render = sum(ms[k] for k in RENDER_KEYS)
+        perceive = step - render
+        out.append({
+            "size": size, "step_ms": step, "render_ms": render, "perception_ms": perceive,
+            "step_ratio_to_baseline": step / ms["baseline"],
+            "agents_per_core": int(budget_ms // step), "agents_per_core_exact": budget_ms / step,
+            "perception_agents_per_core": int(budget_ms // perceive), "budget_ms": budget_ms,
+        })
+    return out
+
+
+# ==================================================================================================
+# report
+# ==================================================================================================
+def _ms(value: float | None) -> str:
+    if value is None or not math.isfinite(value):
+        return "—"
+    return f"{value:.3f}" if value < 1 else f"{value:.2f}" if value < 100 else f"{value:.0f}"
+
+
+def report(result: dict, console=None) -> None:
+    """Print the tables of a :func:`run` result."""
+    console = console or common.make_console()
+    s, env = result["settings"], result["environment"]
+    console.print(
+        f"[bold]{NAME}[/bold]  {'quick' if s['quick'] else 'full'} run, {s['repeats']} repeats; median ms per call. "
+        f"{env['processor']} ({env['cpu_count']} CPUs), Python {env['python']}, numpy {env['packages'].get('numpy')}, "
+        f"OpenCV {env['packages'].get('opencv-python-headless')}",
+        highlight=False,
+    )
+    sizes = s["sizes"]
+    multi = [t for t in s["threads"] if t != 1]
+    by = {(r["size"], r["threads"], r["op"]): r for r in result["rows"]}
+    rows = []
+    for op in OPS:
+        cells = [op.group, op.label + (" *" if op.in_step else "")]
+        for size in sizes:
+            r = by.get((size, 1, op.key))
+            cells.append("—" if r is None else _ms(r["ms"]))
+            cells.append("—" if r is None else common.fmt_ratio(r["ratio_to_baseline"]))
+            if multi:
+                m = by.get((size, multi[0], op.key))
+                cells.append("—" if m is None else _ms(m["ms"]))
+        rows.append(cells)
+    columns = [("group", "left"), ("operation", "left")]
+    for size in sizes:
+        columns += [f"{size} ms", "÷ baseline"] + ([f"{size} ms, {multi[0]} thr"] if multi else [])
+    common.print_table(
+        console, "Milliseconds per frame (1 OpenCV thread; ratio to cv2 cvtColor + threshold on the same frame)",
+        columns, rows,
+        "* = part of the agent step. Render: nadir view from 30 m, 2 balls, 1 fire, procedural terrain. Geolocation: "
+        f"camera {ALTITUDE_M:g} m up, tilt {TILT_DEG:g}°, {DEM_CELL_M:g} m grid DEM of hills; UT = 13 ray casts "
+        f"(azimuth, elevation, DEM error, 3 camera-position errors).\nRoss et al. (spec 002 §4.3): "
+        f"{PAPER_GEOLOCATION_MS:g} ms mean per geolocation run on the onboard ReadyBoard at 4 Hz (planner sharing the "
+        "CPU); thesis 000 gives no processing times.",
+    )
+    step_rows = []
+    for st in result["steps"]:
+        step_rows.append([
+            st["size"], _ms(st["render_ms"]), _ms(st["perception_ms"]), _ms(st["step_ms"]),
+            common.fmt_ratio(st["step_ratio_to_baseline"]), f"{st['budget_ms']:.0f}",
+            f"[bold]{st['agents_per_core']}[/bold] ({st['agents_per_core_exact']:.1f})",
+            st["perception_agents_per_core"],
+        ])
+    common.print_table(
+        console, f"Agent step budget at {s['agent_rate_hz']:g} Hz, one core",
+        ["size", "render ms", "perceive ms", "step ms", "step ÷ baseline", "budget ms", "agents / core",
+         "perception-only agents / core"],
+        step_rows,
+        "Step = " + " + ".join(OP_BY_KEY[k].label for k in s["step_ops"]) + ".\nAgents per core = floor(budget / "
+        "step); perception-only drops the rendering (a real camera). The agent's fusion and messaging are not "
+        "included (see skymesh bench fusion-ops / scale).",
+    )
+    goal = result["goals"]["one_agent_per_core"]
+    console.print(f"{common.verdict(goal['pass'])}  {goal['description']}", highlight=False)
