@@ -42,7 +42,7 @@ def eif_update(belief: Gaussian, model, z, linearization_point=None) -> Gaussian
 
     ``linearization_point`` defaults to the belief's mean; pass it explicitly when the belief is not
     yet fully observable (e.g. a bearing-only track initialised from a prior along a ray)."""
-    z = validation.as_vector(np.atleast_1d(np.asarray(z, dtype=float)), "measurement z", model.dim)
+    z = validation.shaped(z, "measurement z", (model.dim,))  # finiteness: checked on the update's result
     mu = belief.mean if linearization_point is None else np.asarray(linearization_point, dtype=float)
     z_hat, H = model.linearize(mu)
     innovation = model.residual(z, z_hat)

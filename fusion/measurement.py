@@ -8,6 +8,8 @@ elevation is the angle of the line of sight above the horizontal plane (negative
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from fusion import validation
@@ -100,37 +102,38 @@ class Bearing3D(_Model):
 
     def __init__(self, state_dim: int, sensor, R):
         self.sensor = validation.as_vector(sensor, "sensor position", 3)
+        self._sensor = tuple(self.sensor.tolist())
         super().__init__(state_dim, 3, R)
 
-    def _delta(self, x):
-        d = np.asarray(x, dtype=float)[:3] - self.sensor
-        rho2 = d[0] ** 2 + d[1] ** 2
+    def _delta(self, x) -> tuple[float, float, float, float]:
+        """``(dx, dy, dz, rho^2)`` as Python floats: scalar geometry is cheaper without numpy scalars."""
+        px, py, pz = (x.tolist() if isinstance(x, np.ndarray) else list(x))[:3]
+        sx, sy, sz = self._sensor
+        dx, dy, dz = px - sx, py - sy, pz - sz
+        rho2 = dx * dx + dy * dy
         if rho2 < 1e-12:
             raise ValueError("azimuth is undefined: the target is straight above or below the sensor")
-        return d, rho2
+        return dx, dy, dz, rho2
 
     def h(self, x) -> np.ndarray:
-        d, rho2 = self._delta(x)
-        return np.array([np.arctan2(d[1], d[0]), np.arctan2(-d[2], np.sqrt(rho2))])
+        return self.linearize(x)[0]
 
     def jacobian(self, x) -> np.ndarray:
         return self.linearize(x)[1]
 
     def linearize(self, x) -> tuple[np.ndarray, np.ndarray]:
-        d, rho2 = self._delta(x)
-        rho = np.sqrt(rho2)
-        r2 = rho2 + d[2] ** 2
-        J = np.array(
-            [
-                [-d[1] / rho2, d[0] / rho2, 0.0],
-                [d[2] * d[0] / (rho * r2), d[2] * d[1] / (rho * r2), -rho / r2],
-            ]
-        )
-        return np.array([np.arctan2(d[1], d[0]), np.arctan2(-d[2], rho)]), self._pad(J)
+        dx, dy, dz, rho2 = self._delta(x)
+        rho = math.sqrt(rho2)
+        r2 = rho2 + dz * dz
+        H = np.zeros((2, self.state_dim))
+        H[0, 0], H[0, 1] = -dy / rho2, dx / rho2
+        H[1, 0], H[1, 1], H[1, 2] = dz * dx / (rho * r2), dz * dy / (rho * r2), -rho / r2
+        return np.array([math.atan2(dy, dx), math.atan2(-dz, rho)]), H
 
     def residual(self, z, z_hat) -> np.ndarray:
         r = np.asarray(z, dtype=float) - z_hat
-        return np.array([wrap_angle(r[0]), r[1]])
+        r[0] = (r[0] + math.pi) % (2.0 * math.pi) - math.pi
+        return r
 
 
 def los_to_azel(line_of_sight) -> np.ndarray:

@@ -162,8 +162,8 @@ def test_linear_update_rejects_bad_measurement(z, match):
 
 @pytest.mark.parametrize(
     ("z", "match"),
-    [([NAN, 0.1], "measurement z contains non-finite"), ([0.1, 0.2, 0.3], "measurement z must have length 2"),
-     ([0.1], "measurement z must have length 2")],
+    [([NAN, 0.1], "non-finite result of the update"), ([0.1, 0.2, 0.3], "measurement z must have shape 2"),
+     ([0.1], "measurement z must have shape 2")],
     ids=["nan-z", "z-too-long", "z-too-short"],
 )
 def test_eif_update_rejects_bad_measurement(z, match):
