@@ -3,6 +3,10 @@
 Example: ``python -m agent --id uav0 --index 0 --fleet demo --scenario run/scenario.json
 --connect tcp/127.0.0.1:7447 --epoch 1700000000.0 --out run/``. With ``--zenoh-config FILE`` the agent
 uses a standard Zenoh JSON5 configuration instead (a real deployment across machines).
+
+``--camera SOURCE`` replaces the synthetic camera with an OpenCV video source (a file path, a device
+index such as ``0``, a stream URL): one frame is read per agent step, the pose comes from the vehicle as
+usual. A source that cannot be opened is an error at start (exit code 2).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import time
 from pathlib import Path
 
 from agent.agent import Agent
+from agent.camera_sensor import VideoSource
 from agent.config import AgentScenario, read_scenario_file
 from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
 from agent.transport import Keys, ZenohTransport, load_config
@@ -40,6 +45,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--parent-pid", type=int, help="exit when this process (the launcher) is gone")
     p.add_argument("--epoch-file", help="wait for the launcher to write the start time here (instead of --epoch)")
     p.add_argument("--ready-file", help="created once this process is ready (with --epoch-file)")
+    p.add_argument("--camera", metavar="SOURCE",
+                   help="an OpenCV video source (file, device index, stream URL) instead of the synthetic camera")
     return p.parse_args(argv)
 
 
@@ -51,13 +58,14 @@ def main(argv=None) -> int:
         key = Path(args.fleet_key_file).read_bytes().strip() if args.fleet_key_file else None
         keys = Keys(args.fleet)
         config = load_config(args.connect, args.zenoh_config)
+        camera = VideoSource(args.camera) if args.camera is not None else None
     except (OSError, ValueError) as err:
         print(f"agent {args.id}: {err}", file=sys.stderr)
         return 2
     duration = args.duration if args.duration is not None else scenario.duration
     subscribe = [f"{keys.root}/belief/**", keys.telemetry("*"), keys.sim("truth")]
     transport = ZenohTransport(args.id, keys, config, subscribe)
-    agent = Agent(args.id, args.index, scenario, transport, keys, seed=args.seed, fleet_key=key)
+    agent = Agent(args.id, args.index, scenario, transport, keys, seed=args.seed, fleet_key=key, camera=camera)
     stop = threading.Event()
     install_stop_handlers(stop)
     epoch = args.epoch if args.epoch is not None else time.time()
@@ -70,6 +78,7 @@ def main(argv=None) -> int:
         )
     finally:
         transport.close()
+        agent.close()
     metrics = {"pid": os.getpid(), **agent.metrics(), **stats.as_dict(), "transport_dropped": transport.dropped}
     try:
         write_json(Path(args.out) / f"agent-{args.id}.json", metrics)

@@ -20,11 +20,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from agent import wire
+from agent.camera_sensor import sensor_from_config
 from agent.config import AgentScenario
 from agent.evaluation import TrackEvaluator
 from agent.netem import LinkEmulator
 from agent.sending import SendScheduler
-from agent.sensing import Bearing, GeometricBearingSensor
+from agent.sensing import Bearing
 from agent.topology import Topology
 from agent.tracking import RemoteTrack, Tracker
 from agent.transport import Keys
@@ -50,10 +51,13 @@ class Counters:
 
 
 class Agent:
-    """One agent of a fleet. ``transport`` needs ``publish(key, bytes)`` and ``drain() -> [Incoming]``."""
+    """One agent of a fleet. ``transport`` needs ``publish(key, bytes)`` and ``drain() -> [Incoming]``.
+
+    ``camera``: an open external video source (:class:`agent.camera_sensor.VideoSource`) that replaces
+    the synthetic camera; ``None`` uses the scenario's ``[sensor]`` (geometric bearings or the camera)."""
 
     def __init__(self, agent_id: str, index: int, scenario: AgentScenario, transport, keys: Keys,
-                 seed: int, fleet_key: bytes | None = None):
+                 seed: int, fleet_key: bytes | None = None, camera=None):
         self.id = agent_id
         self.index = index
         self.scenario = scenario
@@ -62,7 +66,8 @@ class Agent:
         self.fleet_key = fleet_key
         self.terrain = terrain_from_config(scenario.terrain)
         self.vehicle = vehicle_from_config(scenario.vehicle, scenario.start_position(index), 0.0)
-        self.sensor = GeometricBearingSensor(scenario.sensor, seed)
+        self.sensor = sensor_from_config(scenario.sensor, seed, self.terrain, camera)
+        self.sensor_outcomes: Counter = Counter()  # reason -> bearings the agent could not use
         self.tracker = Tracker(scenario.tracking, scenario.step, self.terrain)
         tasking = {"search": "lawnmower", "spacing": 60.0, "orbit_radius": 40.0, **scenario.tasking}
         self.planner = PlaceholderPlanner(
@@ -89,8 +94,9 @@ class Agent:
     def step(self, t: float) -> None:
         state = self.vehicle.state()
         truth = self.truth_at(t)
-        bearings = self.sensor.measure(t, state.position, truth or [])
+        bearings = self.sensor.measure(t, state, truth or [])
         self.tracker.advance(self.tracker.model.epoch_of(t))
+        bearings = self._usable(bearings)
         self.tracker.update(bearings)
         self.last_bearings = bearings
         self._publish_measurements(t, bearings)
@@ -107,6 +113,23 @@ class Agent:
         if truth is not None:
             self.evaluator.record(t, truth, estimates)
         self.steps += 1
+
+    def _usable(self, bearings: list[Bearing]) -> list[Bearing]:
+        """Bearings the trajectory window can still take (a camera that waited for a late pose may hand
+        over some from before it); the others are counted, never applied."""
+        oldest = self.tracker.epoch - self.tracker.model.window + 1
+        keep = []
+        for b in bearings:
+            epoch = self.tracker.model.epoch_of(b.t)
+            if oldest <= epoch <= self.tracker.epoch:
+                keep.append(b)
+            else:
+                self.sensor_outcomes["bearing_outside_window"] += 1
+        return keep
+
+    def close(self) -> None:
+        """Release the sensor (an external camera)."""
+        self.sensor.close()
 
     # -- receiving ------------------------------------------------------------------------------
     def receive(self, item, t: float) -> None:
@@ -241,6 +264,7 @@ class Agent:
         payload = {
             "position": state.position, "velocity": state.velocity, "yaw": float(state.yaw),
             "bearings": np.array([b.azel for b in bearings]).reshape(-1, 2),
+            "video_quality": self.sensor.video_quality,  # D(t), thesis 000 §2.4 (None: no video)
             "neighbours": self.topology.neighbours(t),
             "topology": self.topology.gossip(t),
             "tracks": [{"id": tid, "mean": est.mean, "cov": est.cov} for tid, est in self.tracker.estimates()],
@@ -255,7 +279,7 @@ class Agent:
         """Raw bearings for the centralized oracle (simulation only; a real fleet does not send these)."""
         payload = {
             "bearings": [
-                {"sensor": b.sensor, "azel": b.azel, "R": b.R, "truth": b.truth_id} for b in bearings
+                {"t": b.t, "sensor": b.sensor, "azel": b.azel, "R": b.R, "truth": b.truth_id} for b in bearings
             ]
         }
         self._send(self.keys.sim(f"measurement/{self.id}"), "measurement", self._envelope("measurement", t, payload))
@@ -283,6 +307,8 @@ class Agent:
                 "count": int(lat.size),
             },
             "targets": self.evaluator.summary(),
+            "sensor": self.sensor.metrics(),
+            "sensor_outcomes": dict(Counter(self.sensor.metrics()["outcomes"]) + self.sensor_outcomes),
         }
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agent.camera_sensor import CameraSensorConfig, sensor_config_from_dict
 from agent.netem import LinkPlan
 from agent.sending import SendConfig
 from agent.sensing import BearingSensorConfig
@@ -54,7 +55,7 @@ class AgentScenario:
     origin: tuple[float, float, float] = (43.5605, 1.4664, 150.0)  # lat, lon [deg], alt [m]; chosen here
     terrain: dict = field(default_factory=lambda: {"kind": "flat"})
     vehicle: dict = field(default_factory=lambda: {"kind": "multirotor"})
-    sensor: BearingSensorConfig = field(default_factory=BearingSensorConfig)
+    sensor: BearingSensorConfig | CameraSensorConfig = field(default_factory=BearingSensorConfig)  # [sensor] kind
     tracking: TrackerConfig = field(default_factory=TrackerConfig)
     sending: SendConfig = field(default_factory=SendConfig)
     tasking: dict = field(default_factory=dict)
@@ -96,7 +97,7 @@ class AgentScenario:
             if section in d:
                 kwargs[section] = dict(d[section])
         if "sensor" in d:
-            kwargs["sensor"] = BearingSensorConfig.from_dict(d["sensor"])
+            kwargs["sensor"] = sensor_config_from_dict(d["sensor"])
         if "tracking" in d:
             kwargs["tracking"] = _dataclass_from_dict(TrackerConfig, d["tracking"], "tracking")
         if "sending" in d:

@@ -1,6 +1,7 @@
 """The geometric bearing sensor: what a down-looking camera plus a detector would report.
 
-It stands in for the camera pipeline (a later issue replaces it behind the same interface) and
+It stands in for the camera pipeline (:class:`agent.camera_sensor.CameraSensor`, ``[sensor] kind =
+"camera"``, has the same interface: ``measure(t, state, truth)``, ``metrics()``, ``video_quality``) and
 produces :class:`Bearing` measurements — azimuth/elevation in NED with their covariance — from the
 world truth it is given as plain data. Noise is isotropic on the line of sight with standard deviation
 ``sigma`` [rad]: perturbing the unit line of sight by a small rotation of ``sigma`` gives
@@ -68,9 +69,18 @@ def bearing_covariance(el: float, sigma: float) -> np.ndarray:
 class GeometricBearingSensor:
     """Detects the targets inside a down-looking cone and within range, with noise, misses and clutter."""
 
+    video_quality = None  # no video: nothing to publish as D(t)
+
     def __init__(self, config: BearingSensorConfig, seed: int):
         self.config = config
         self.rng = np.random.default_rng(seed)
+        self.bearings = 0
+
+    def metrics(self) -> dict:
+        return {"kind": "bearing", "bearings": self.bearings, "outcomes": {}}
+
+    def close(self) -> None:
+        pass
 
     def in_view(self, sensor: np.ndarray, target: np.ndarray) -> bool:
         d = np.asarray(target, float) - sensor
@@ -80,9 +90,10 @@ class GeometricBearingSensor:
         off_nadir = np.arccos(np.clip(d[2] / dist, -1.0, 1.0))  # nadir is +z in NED
         return off_nadir <= self.config.fov / 2
 
-    def measure(self, t: float, sensor, truth: list[dict]) -> list[Bearing]:
-        """Bearings to the true targets (given as ``{"id", "position"}``) seen from ``sensor`` at ``t``."""
-        sensor = np.asarray(sensor, float)
+    def measure(self, t: float, state, truth: list[dict]) -> list[Bearing]:
+        """Bearings to the true targets (given as ``{"id", "position"}``) seen at ``t`` from ``state``: a
+        :class:`agent.vehicle.VehicleState` (only its position matters) or a camera position (3,)."""
+        sensor = np.asarray(getattr(state, "position", state), float)
         out = []
         for target in truth:
             pos = np.asarray(target["position"], float)
@@ -91,6 +102,7 @@ class GeometricBearingSensor:
         for _ in range(self.rng.poisson(self.config.false_alarms)):
             out.append(self._noisy(t, sensor, self._random_direction_in_cone(), None))
         self.rng.shuffle(out)
+        self.bearings += len(out)
         return out
 
     def _noisy(self, t, sensor, line_of_sight, truth_id) -> Bearing:

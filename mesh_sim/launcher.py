@@ -68,7 +68,7 @@ def new_run_dir(base: Path, name: str) -> Path:
 
 class Launcher:
     def __init__(self, scenario: Scenario, run_dir: Path, speed: float = 1.0, rerun: str = "save",
-                 console: Console | None = None, extra_env: dict | None = None):
+                 console: Console | None = None, extra_env: dict | None = None, cameras: dict | None = None):
         if not speed > 0:
             raise ValueError(f"--speed must be positive, got {speed}")
         if rerun not in ("save", "spawn", "off") and not rerun.startswith("connect:"):
@@ -80,6 +80,7 @@ class Launcher:
         self.console = console or Console(stderr=True)
         self.env = {**os.environ, **(extra_env or {})}
         self.fleet = f"{scenario.name}-{uuid.uuid4().hex[:8]}"
+        self.cameras = dict(cameras or {})  # agent name -> OpenCV video source replacing its synthetic camera
         self.children: list[Child] = []
 
     # -- lifecycle --------------------------------------------------------------------------------
@@ -147,6 +148,7 @@ class Launcher:
             self._spawn(f"uav{i}", "agent", [
                 "-m", "agent", "--id", f"uav{i}", "--index", str(i), "--scenario", str(scenario_file),
                 "--seed", str(sc.seed * 1000 + i), "--out", str(self.run_dir), *common, *timing(f"uav{i}"),
+                *(["--camera", str(self.cameras[f"uav{i}"])] if f"uav{i}" in self.cameras else []),
             ])
 
     def _spawn(self, name: str, role: str, args: list[str]) -> None:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from agent.agent import Agent
 from agent.bus import InMemoryBus
+from agent.camera_sensor import VideoSource
 from agent.runtime import write_json
 from agent.transport import Keys
 from mesh_sim import results
@@ -31,13 +32,20 @@ def agent_subscriptions(keys: Keys) -> list[str]:
     return [f"{keys.root}/belief/**", keys.telemetry("*"), keys.sim("truth")]
 
 
-def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off") -> dict:
-    """Run ``scenario`` to completion in this process; returns the merged metrics."""
+def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off", cameras: dict | None = None) -> dict:
+    """Run ``scenario`` to completion in this process; returns the merged metrics. ``cameras`` maps an agent
+    name to an OpenCV video source (file, device, URL) that replaces its synthetic camera."""
     sc = scenario.agent
     keys = Keys(f"{scenario.name}-{uuid.uuid4().hex[:8]}")
     bus = InMemoryBus()
+    cameras = cameras or {}
+    unknown = set(cameras) - {f"uav{i}" for i in range(sc.agents)}
+    if unknown:
+        raise ValueError(f"--camera names no agent of this run: {sorted(unknown)}")
+    sources = {name: VideoSource(source) for name, source in cameras.items()}  # ValueError if one cannot open
     agents = [
-        Agent(f"uav{i}", i, sc, bus.endpoint(f"uav{i}", agent_subscriptions(keys)), keys, seed=sc.seed * 1000 + i)
+        Agent(f"uav{i}", i, sc, bus.endpoint(f"uav{i}", agent_subscriptions(keys)), keys, seed=sc.seed * 1000 + i,
+              camera=sources.get(f"uav{i}"))
         for i in range(sc.agents)
     ]
     world = World(scenario, bus.endpoint("world", World.subscriptions(keys)), keys)
@@ -61,6 +69,8 @@ def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off") -> dict:
                 observer.handle(item)
     if observer is not None:
         observer.close()
+    for agent in agents:
+        agent.close()
     wall = time.time() - started
     for agent in agents:
         write_json(run_dir / f"agent-{agent.id}.json", {

@@ -17,6 +17,7 @@ What is logged, on the ``sim_time`` timeline (a duration, from each envelope's s
                                                  orange if only one does
     metrics/<id>/tracks            Scalars       number of tracks the agent reports
     metrics/<id>/bytes_rx          Scalars       the agent's own received-bytes count, if its telemetry has one
+    metrics/<id>/video_quality     Scalars       the camera's video-quality measure D(t), if its telemetry has one
     metrics/<id>/bytes_seen        Scalars       bytes the observer has received from the agent (all kinds)
 
 Run as a process (the launcher stops it with SIGTERM; it also exits when its parent dies)::
@@ -209,6 +210,9 @@ def parse_telemetry(payload: dict) -> dict:
     rx = payload.get("bytes_rx")
     numeric = isinstance(rx, int | float) and not isinstance(rx, bool)
     out["bytes_rx"] = float(rx) if numeric and np.isfinite(rx) else None
+    vq = payload.get("video_quality")
+    numeric = isinstance(vq, int | float) and not isinstance(vq, bool)
+    out["video_quality"] = float(vq) if numeric and np.isfinite(vq) else None
     return out
 
 
@@ -358,6 +362,8 @@ class Observer:
         rec.log(f"metrics/{agent}/tracks", rr.Scalars(float(len(t["tracks"]))))
         if t["bytes_rx"] is not None:
             rec.log(f"metrics/{agent}/bytes_rx", rr.Scalars(t["bytes_rx"]))
+        if t.get("video_quality") is not None:
+            rec.log(f"metrics/{agent}/video_quality", rr.Scalars(t["video_quality"]))
 
         self._positions[agent] = pos
         self._reports[agent] = (stamp, t["neighbours"] - {agent})

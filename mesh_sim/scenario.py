@@ -46,13 +46,25 @@ def resolve(name_or_path: str) -> Path:
     raise ValueError(f"no scenario {name_or_path!r}: not a file, and not one of {shipped()}")
 
 
+#: The kind a section has when it does not name one.
+_DEFAULT_KINDS = {"sensor": "bearing"}
+
+
+def _same_kind(section: str, current: dict, override: dict) -> bool:
+    if "kind" not in override:
+        return True
+    return override["kind"] == current.get("kind", _DEFAULT_KINDS.get(section))
+
+
 def load(name_or_path: str, **overrides) -> Scenario:
     """Load and validate a scenario. ``overrides`` replace top-level settings (``agents=8``) or merge into
-    a section (``tracking={"policy": "ci"}`` changes only the policy)."""
+    a section (``tracking={"policy": "ci"}`` changes only the policy). A section override that names a
+    different ``kind`` replaces the section (``sensor={"kind": "camera"}`` on a scenario with geometric
+    bearings: the bearing settings do not apply to a camera)."""
     path = resolve(name_or_path)
     raw = read_scenario_file(path)
     for key, value in overrides.items():
-        if isinstance(value, dict) and isinstance(raw.get(key), dict):
+        if isinstance(value, dict) and isinstance(raw.get(key), dict) and _same_kind(key, raw[key], value):
             raw[key] = {**raw[key], **value}
         elif value is not None:
             raw[key] = value

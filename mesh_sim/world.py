@@ -47,11 +47,11 @@ class Oracle:
         bearings stamped far after it are a clock fault and rejected)."""
         try:
             bearings = [
-                Bearing(env.stamp, np.asarray(b["sensor"], float), np.asarray(b["azel"], float),
+                Bearing(_stamp(b.get("t", env.stamp)), np.asarray(b["sensor"], float), np.asarray(b["azel"], float),
                         np.asarray(b["R"], float), b["truth"])
                 for b in env.payload["bearings"]
             ]
-        except (KeyError, TypeError, ValueError):
+        except (KeyError, TypeError, ValueError, AttributeError):
             self.rejected += 1
             return
         epoch = self.tracker.model.epoch_of(env.stamp)
@@ -60,6 +60,10 @@ class Oracle:
             return
         if epoch > self.tracker.epoch:
             self.tracker.advance(epoch)
+        oldest = self.tracker.epoch - self.tracker.model.window + 1
+        if any(not oldest <= self.tracker.model.epoch_of(b.t) <= self.tracker.epoch for b in bearings):
+            self.late += 1  # a camera bearing that waited for its pose longer than the window
+            bearings = [b for b in bearings if oldest <= self.tracker.model.epoch_of(b.t) <= self.tracker.epoch]
         try:
             self.tracker.update(bearings, by_label=True)
         except ValueError:  # older than the trajectory window
@@ -68,6 +72,13 @@ class Oracle:
     def evaluate(self, targets) -> None:
         t = self.tracker.epoch * self.tracker.model.step
         self.evaluator.record(t, truth_snapshot(targets, t), self.tracker.estimates())
+
+
+def _stamp(value) -> float:
+    """A bearing's own time (a camera's bearings may be older than the message that carries them)."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
+        raise ValueError(f"bad bearing time {value!r}")
+    return float(value)
 
 
 class World:
