@@ -60,6 +60,11 @@ BENCHMARKS: dict[str, Benchmark] = {
             "ms per frame for render, detect and geolocate at 320x240 and 640x480; agents per core at 5 Hz",
         ),
         Benchmark(
+            "geolocation-latency",
+            "mesh_sim.bench.geolocation_latency",
+            "Ross et al.: geolocation error with 430 ms of pose latency, without and with compensation",
+        ),
+        Benchmark(
             "coop-vs-single",
             "mesh_sim.bench.coop_vs_single",
             "thesis 000 Table 3.1: spread of the target estimate from one observer vs two cooperating observers",
