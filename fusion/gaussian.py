@@ -25,7 +25,7 @@ from scipy.linalg.lapack import dpotrf, dpotrs
 
 from fusion import validation
 
-_sum = np.add.reduce  # without ndarray.sum's Python wrapper: this runs on every predict and update
+_sum = np.add.reduce  # without ndarray.sum's Python wrapper: it runs on every predict and update
 
 
 class UninformativeBeliefError(ValueError):
@@ -147,10 +147,10 @@ class Gaussian:
         gain.flat[:: n + 1] += 1.0
         rhs = np.concatenate([psi, (F_inv.T @ self.y)[:, None]], axis=1)
         sol = np.linalg.solve(gain, rhs)
+        if not math.isfinite(float(_sum(sol, axis=None))):  # y and Y in one reduction
+            raise ValueError("non-finite result of the prediction (F, F^-1 or Q contains NaN or inf)")
         Y = sol[:, :-1]
-        out = Gaussian(sol[:, -1], 0.5 * (Y + Y.T))
-        out._check_finite("prediction (F, F^-1 or Q contains NaN or inf)")
-        return out
+        return Gaussian(sol[:, -1], 0.5 * (Y + Y.T))
 
     def update(self, H: np.ndarray, R_inv: np.ndarray, z: np.ndarray) -> Gaussian:
         """Linear measurement update ``Y + H^T R^-1 H``, ``y + H^T R^-1 z`` (Merino (3.17)-(3.18))."""
@@ -158,15 +158,12 @@ class Gaussian:
         m = H.shape[0]
         R_inv = validation.shaped(R_inv, "inverse measurement noise R^-1", (m, m))
         z = validation.shaped(z, "measurement z", (m,))
-        HtRi = H.T @ R_inv
-        out = Gaussian(self.y + HtRi @ z, self.Y + HtRi @ H)
-        out._check_finite("update (H, R^-1 or the measurement z contains NaN or inf)")
-        return out
-
-    def _check_finite(self, what: str) -> None:
-        """One cheap test for every input at once: a NaN or inf anywhere propagates into the sums."""
-        if not math.isfinite(float(_sum(self.Y, axis=None)) + float(_sum(self.y))):
-            raise ValueError(f"non-finite result of the {what}")
+        # Both increments in one product, [H^T R^-1 H | H^T R^-1 z], checked in one reduction: a NaN or inf
+        # in H, R^-1 or z propagates into its sum.
+        increment = H.T @ R_inv @ np.concatenate([H, z[:, None]], axis=1)
+        if not math.isfinite(float(_sum(increment, axis=None))):
+            raise ValueError("non-finite result of the update (H, R^-1 or the measurement z contains NaN or inf)")
+        return Gaussian(self.y + increment[:, -1], self.Y + increment[:, :-1])
 
     # -- marginals, conditionals, divergences -----------------------------------------------------
     def marginal(self, keep: Sequence[int]) -> Gaussian:

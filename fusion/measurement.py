@@ -71,27 +71,34 @@ class Bearing2D(_Model):
         if sensor.shape[0] not in (2, 3):
             raise ValueError(f"sensor position must have length 2 or 3 (altitude ignored), got {sensor.shape[0]}")
         self.sensor = sensor[:2]
+        self._sensor = tuple(self.sensor.tolist())
         super().__init__(state_dim, spatial_dims, np.array([[sigma**2]]))
 
-    def _delta(self, x):
-        d = np.asarray(x, dtype=float)[:2] - self.sensor
-        rho2 = float(d @ d)
+    def _delta(self, x) -> tuple[float, float, float]:
+        """``(dx, dy, rho^2)`` as Python floats (scalar geometry is cheaper without numpy scalars)."""
+        px, py = (x.tolist() if isinstance(x, np.ndarray) else list(x))[:2]
+        dx, dy = px - self._sensor[0], py - self._sensor[1]
+        rho2 = dx * dx + dy * dy
         if rho2 < 1e-12:
             raise ValueError("the bearing is undefined: the target is at the sensor position")
-        return d, rho2
+        return dx, dy, rho2
 
     def h(self, x) -> np.ndarray:
-        d, _ = self._delta(x)
-        return np.array([np.arctan2(d[1], d[0])])
+        return self.linearize(x)[0]
 
     def jacobian(self, x) -> np.ndarray:
-        d, rho2 = self._delta(x)
-        J = np.zeros((1, self.spatial_dims))
-        J[0, :2] = [-d[1] / rho2, d[0] / rho2]
-        return self._pad(J)
+        return self.linearize(x)[1]
+
+    def linearize(self, x) -> tuple[np.ndarray, np.ndarray]:
+        dx, dy, rho2 = self._delta(x)
+        H = np.zeros((1, self.state_dim))
+        H[0, 0], H[0, 1] = -dy / rho2, dx / rho2
+        return np.array([math.atan2(dy, dx)]), H
 
     def residual(self, z, z_hat) -> np.ndarray:
-        return wrap_angle(np.asarray(z, dtype=float) - z_hat)
+        r = np.asarray(z, dtype=float) - z_hat
+        r[0] = (r[0] + math.pi) % (2.0 * math.pi) - math.pi
+        return r
 
 
 class Bearing3D(_Model):

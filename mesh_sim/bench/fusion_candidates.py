@@ -280,10 +280,14 @@ def numpy_cf(sc: Scenario, checks: bool = True, history: int = 64) -> Candidate:
     sent: OrderedDict = OrderedDict()  # seq -> local belief sent
     inbound_at_send: OrderedDict = OrderedDict()  # seq -> B at that time
     st = {"yB": np.zeros(sc.n), "YB": np.zeros((sc.n, sc.n)), "last": None, "fused": None}
-    seqs, eigvalsh = itertools.count(1), np.linalg.eigvalsh
+    seqs, eigvalsh, cholesky = itertools.count(1), np.linalg.eigvalsh, np.linalg.cholesky
 
-    def psd(M):
-        return eigvalsh(M)[0] >= -_PSD_RTOL * max(1.0, float(np.max(np.abs(M))))
+    def psd(M):  # the same decision as fusion.validation.is_psd: Cholesky first, eigenvalues only if it fails
+        try:
+            cholesky(M)
+            return True
+        except np.linalg.LinAlgError:
+            return eigvalsh(M)[0] >= -_PSD_RTOL * max(1.0, float(np.max(np.abs(M))))
 
     def step():
         seq = next(seqs)
