@@ -67,7 +67,8 @@ MEAN_DEGREE = 3.0
 CHURN_EVERY_S = (3.0, 5.0)  # a topology event every 3-5 s (from the issue)
 RANGE_M = 200.0  # radio range [m]; chosen here: the ends of the starting line are ~200 m apart
 BURST_S, BURST_MIN_BYTES = 2.0, 16 * 1024  # token-bucket depth (see the module docstring); chosen here
-SENSOR = {"range": 300.0, "fov_deg": 120.0}  # targets found within seconds; chosen here
+# The geometric bearing sensor (the network is under test, not perception); targets found within seconds.
+SENSOR = {"kind": "bearing", "range": 300.0, "fov_deg": 120.0}
 COVERAGE_GOAL = 0.8  # an agent "tracks" a target holding it at least this share of the time; chosen here
 ACQUIRE_S = 2.0  # s allowed to take up a target the oracle tracks (1 s send period + 3 confirming hits); chosen here
 
