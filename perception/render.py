@@ -302,55 +302,11 @@ def render_frame(
     return RenderedFrame(img, th, labels, fire_mask, alpha, info)
 
 
-def render_rgb(
-    project,
-    width: int,
-    height: int,
-    targets: Sequence = (),
-    ground=None,
-    fires: Sequence = (),
-    terrain=None,
-    seed=None,
-    **kwargs,
-) -> RenderedFrame:
-    """RGB frame only (``.rgb``, labels, fire mask); see :func:`render_frame`."""
-    return render_frame(
-        project,
-        width,
-        height,
-        targets,
-        fires,
-        ground=ground,
-        terrain=terrain,
-        seed=seed,
-        rgb=True,
-        thermal=False,
-        **kwargs,
-    )
+def render_rgb(project, width: int, height: int, targets: Sequence = (), **kwargs) -> RenderedFrame:
+    """RGB frame only (``.rgb``, labels, fire mask); keyword arguments as :func:`render_frame`."""
+    return render_frame(project, width, height, targets, rgb=True, thermal=False, **kwargs)
 
 
-def render_thermal(
-    project,
-    width: int,
-    height: int,
-    targets: Sequence = (),
-    ground=None,
-    fires: Sequence = (),
-    terrain=None,
-    seed=None,
-    **kwargs,
-) -> RenderedFrame:
-    """Thermal frame only (``.thermal`` in Kelvin, labels, fire mask); see :func:`render_frame`."""
-    return render_frame(
-        project,
-        width,
-        height,
-        targets,
-        fires,
-        ground=ground,
-        terrain=terrain,
-        seed=seed,
-        rgb=False,
-        thermal=True,
-        **kwargs,
-    )
+def render_thermal(project, width: int, height: int, targets: Sequence = (), **kwargs) -> RenderedFrame:
+    """Thermal frame only (``.thermal`` in kelvin, labels, fire mask); keyword arguments as :func:`render_frame`."""
+    return render_frame(project, width, height, targets, rgb=False, thermal=True, **kwargs)

@@ -15,6 +15,7 @@ import math
 import os
 import platform
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -214,3 +215,32 @@ def _cpu_model() -> str:
     except OSError:
         pass
     return platform.processor()
+
+
+@contextmanager
+def runs_folder(runs_dir, prefix: str) -> Iterator[Path]:
+    """Where a benchmark's run folders go: ``runs_dir`` if given (kept), else a temporary folder
+    (removed afterwards, so a benchmark leaves nothing behind)."""
+    if runs_dir is not None:
+        path = Path(runs_dir)
+        path.mkdir(parents=True, exist_ok=True)
+        yield path
+        return
+    with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+        yield Path(tmp)
+
+
+@contextmanager
+def run_progress(name: str, total: int):
+    """A transient bar over a benchmark's runs on stderr (only on a terminal); a launcher's own bar
+    (simulation time of the current run) shares the console and shows below it. Yields
+    ``(console, advance(label, steps))``."""
+    console = make_console(stderr=True)
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns, console=console, transient=True, disable=not console.is_terminal) as bar:
+        task = bar.add_task(name, total=total)
+
+        def advance(label: str, steps: int) -> None:
+            bar.update(task, advance=steps, description=f"{name}: {label}", refresh=True)
+
+        yield console, advance

@@ -54,6 +54,7 @@ import json
 import math
 import os
 import queue
+import signal
 import subprocess
 import sys
 import tempfile
@@ -288,10 +289,11 @@ class _Worker:
             return ""
 
     def stop(self, kill: bool) -> None:
-        """End of input makes an idle worker exit; a busy one (on error or Ctrl-C) is killed by PID."""
+        """End of input makes an idle worker exit; a busy one (on error or Ctrl-C) gets SIGTERM (it removes its
+        run folder and exits), then SIGKILL after a grace period, by PID."""
         try:
             if kill:
-                self.process.kill()
+                self.process.terminate()
             else:
                 self.process.stdin.close()
             self.process.wait(timeout=10)
@@ -306,6 +308,8 @@ def _worker_main() -> int:
     """``python -m mesh_sim.bench.rumor --worker``: run jobs from stdin until it closes."""
     out = os.fdopen(os.dup(sys.stdout.fileno()), "w")
     sys.stdout = sys.stderr  # nothing but results goes to the result pipe
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent decides
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # unwinds, so the run folder is removed
     for line in sys.stdin:
         if line.strip():
             out.write(json.dumps(_one(json.loads(line))) + "\n")

@@ -48,15 +48,12 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 import threading
 import time
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from pathlib import Path
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from mesh_sim.bench import common
 
@@ -80,13 +77,15 @@ def run(
     duration: float | None = None,
     runs_dir: str | os.PathLike | None = None,
     stop_early: bool | None = None,
+    overrides: dict | None = None,
 ) -> dict:
     """Run the benchmark.
 
     ``repeats``: runs per size (default 1; their agents are pooled). ``sizes`` and ``duration``
     (simulation seconds per run) override the mode's defaults. Run folders go to a temporary folder
     removed afterwards, or under ``runs_dir`` when given (kept). ``stop_early`` (default: full mode
-    only) skips the larger sizes once a size misses more than ``STOP_MISS_SHARE`` of its steps."""
+    only) skips the larger sizes once a size misses more than ``STOP_MISS_SHARE`` of its steps.
+    ``overrides`` change the scenario like ``mesh_sim.scenario.load``'s keywords (e.g. the sensor)."""
     from mesh_sim.scenario import load
 
     sizes = tuple(sizes if sizes is not None else QUICK_SIZES if quick else FULL_SIZES)
@@ -100,18 +99,21 @@ def run(
     if runs < 1:
         raise ValueError(f"repeats must be at least 1, got {repeats}")
     stop_early = (not quick) if stop_early is None else stop_early
-    base_scenario = load(SCENARIO)
+    overrides = dict(overrides or {})
+    base_scenario = load(SCENARIO, **overrides)
     rate_hz = base_scenario.agent.rate_hz
 
     rows: list[dict] = []
     load_before = os.getloadavg()
-    with _runs_folder(runs_dir) as base, _progress(len(sizes) * runs) as (console, advance):
+    folder = common.runs_folder(runs_dir, "skymesh-bench-scale-")
+    with folder as base, common.run_progress(NAME, len(sizes) * runs) as (console, advance):
         launcher_console = console if console.is_terminal else Console(stderr=True, quiet=True)
         for n in sizes:
             outcomes = []
             for r in range(runs):
                 advance(f"N={n}" + (f" run {r + 1}/{runs}" if runs > 1 else "") + f" ({duration:g} s)", 0)
-                outcomes.append(_one_run(load(SCENARIO, agents=n, duration=duration), base, launcher_console))
+                outcomes.append(_one_run(load(SCENARIO, **{**overrides, "agents": n, "duration": duration}), base,
+                                         launcher_console))
                 if outcomes[-1]["status"] == "interrupted":  # Ctrl-C: the launcher stopped its run; stop here too
                     raise KeyboardInterrupt
                 advance(f"N={n} done", 1)
@@ -135,32 +137,6 @@ def run(
         "rows": rows,
         "goals": _goals(rows),
     }
-
-
-@contextmanager
-def _runs_folder(runs_dir) -> Iterator[Path]:
-    if runs_dir is not None:
-        path = Path(runs_dir)
-        path.mkdir(parents=True, exist_ok=True)
-        yield path
-        return
-    with tempfile.TemporaryDirectory(prefix="skymesh-bench-scale-") as tmp:
-        yield Path(tmp)
-
-
-@contextmanager
-def _progress(total: int):
-    """A transient bar over the runs on stderr (only on a terminal). The launcher's own bar (simulation
-    time of the current run) shares the console and shows nested below it."""
-    console = common.make_console(stderr=True)
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-    with Progress(*columns, console=console, transient=True, disable=not console.is_terminal) as bar:
-        task = bar.add_task(NAME, total=total)
-
-        def advance(label: str, steps: int) -> None:
-            bar.update(task, advance=steps, description=f"{NAME}: {label}", refresh=True)
-
-        yield console, advance
 
 
 def _one_run(scenario, base: Path, console: Console) -> dict:

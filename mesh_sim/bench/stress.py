@@ -43,14 +43,11 @@ from __future__ import annotations
 import math
 import os
 import random
-import tempfile
 from collections import Counter
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from pathlib import Path
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from mesh_sim.bench import common
 from mesh_sim.bench.rumor import anees_interval, independent_samples
@@ -144,7 +141,8 @@ def run(
     seeds = [seed + r for r in range(runs)]
     load_before = os.getloadavg()
     rows = []
-    with _runs_folder(runs_dir) as base, _progress(len(caps) * runs) as (console, advance):
+    folder = common.runs_folder(runs_dir, "skymesh-bench-stress-")
+    with folder as base, common.run_progress(NAME, len(caps) * runs) as (console, advance):
         launcher_console = console if console.is_terminal else Console(stderr=True, quiet=True)
         for cap in caps:
             outcomes = []
@@ -176,31 +174,6 @@ def run(
 
 def _cap(cap: float) -> str:
     return "unlimited" if cap == 0 else f"{cap / 1000:g} kB/s"
-
-
-@contextmanager
-def _runs_folder(runs_dir) -> Iterator[Path]:
-    if runs_dir is not None:
-        path = Path(runs_dir)
-        path.mkdir(parents=True, exist_ok=True)
-        yield path
-        return
-    with tempfile.TemporaryDirectory(prefix="skymesh-bench-stress-") as tmp:
-        yield Path(tmp)
-
-
-@contextmanager
-def _progress(total: int):
-    """A transient bar over the runs on stderr (only on a terminal); the launcher's bar shows below it."""
-    console = common.make_console(stderr=True)
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-    with Progress(*columns, console=console, transient=True, disable=not console.is_terminal) as bar:
-        task = bar.add_task(NAME, total=total)
-
-        def advance(label: str, steps: int) -> None:
-            bar.update(task, advance=steps, description=f"{NAME}: {label}", refresh=True)
-
-        yield console, advance
 
 
 def _one_run(scenario, base: Path, console: Console, cap: float) -> dict:

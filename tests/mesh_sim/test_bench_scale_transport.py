@@ -48,7 +48,9 @@ def private_tmp(tmp_path, monkeypatch):
 
 
 def test_scale_smallest_run_structure_and_cleanup(private_tmp):
-    result = scale.run(quick=True, sizes=(2,), duration=4.0)
+    # The geometric sensor with a wide view, so that tracks are confirmed and shared within 4 s.
+    wide = {"sensor": {"kind": "bearing", "range": 400.0, "fov_deg": 150.0}}
+    result = scale.run(quick=True, sizes=(2,), duration=4.0, overrides=wide)
     assert result["benchmark"] == "scale"
     assert result["settings"]["measured_sizes"] == [2]
     [row] = result["rows"]

@@ -4,10 +4,8 @@ frames from a video file (``--camera``). Checks that no process it caused is lef
 from __future__ import annotations
 
 import math
-import time
 
 import cv2
-import psutil
 import pytest
 
 from mesh_sim.launcher import Launcher, new_run_dir
@@ -16,18 +14,12 @@ from perception.camera import Intrinsics
 from perception.pose import CameraPose, Gimbal
 from perception.render import render_frame
 from perception.scene import Target
+from tests.processes import assert_all_gone
 
 VIDEO_FRAMES = 20
 DURATION = 15.0
 
 
-def _assert_all_gone(pids, timeout: float = 15.0) -> None:
-    deadline = time.time() + timeout
-    alive = set(pids)
-    while alive and time.time() < deadline:
-        alive = {p for p in alive if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE}
-        time.sleep(0.1)
-    assert not alive, f"processes left running: {sorted(alive)}"
 
 
 @pytest.fixture(scope="module")
@@ -72,4 +64,4 @@ def test_live_camera_run_reads_the_video_file_for_one_agent(camera_run):
 
 
 def test_live_camera_run_leaves_no_process(camera_run):
-    _assert_all_gone(camera_run[0].pids.values())
+    assert_all_gone(camera_run[0].pids.values())

@@ -19,15 +19,7 @@ import pytest
 
 from mesh_sim.launcher import Launcher, new_run_dir
 from mesh_sim.scenario import load
-
-
-def _assert_all_gone(pids, timeout: float = 15.0) -> None:
-    deadline = time.time() + timeout
-    alive = set(pids)
-    while alive and time.time() < deadline:
-        alive = {p for p in alive if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE}
-        time.sleep(0.1)
-    assert not alive, f"processes left running: {sorted(alive)}"
+from tests.processes import assert_all_gone
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +68,7 @@ def test_live_run_writes_the_run_folder(completed_run):
 
 
 def test_live_run_leaves_no_process(completed_run):
-    _assert_all_gone(completed_run.pids.values())
+    assert_all_gone(completed_run.pids.values())
 
 
 def test_killing_an_agent_stops_the_whole_run(tmp_path):
@@ -100,7 +92,7 @@ def test_killing_an_agent_stops_the_whole_run(tmp_path):
     killer.join(timeout=5)
     assert outcome.status.startswith("failed: uav1"), outcome.status
     assert time.time() - started < 40, "the launcher should stop long before the scenario's 60 s"
-    _assert_all_gone(outcome.pids.values())
+    assert_all_gone(outcome.pids.values())
     died = next(a for a in outcome.metrics["agents"] if a["id"] == "uav1")
     assert died["status"].startswith("died")
     assert (outcome.run_dir / "metrics.json").exists()
@@ -121,7 +113,7 @@ def test_children_exit_when_the_launcher_is_killed(tmp_path):
         time.sleep(3.0)
         launcher.kill()
         launcher.wait()
-        _assert_all_gone([c.pid for c in children], timeout=20)
+        assert_all_gone([c.pid for c in children], timeout=20)
     finally:
         if launcher.poll() is None:
             launcher.kill()

@@ -9,14 +9,12 @@ the agents itself (the loop of :func:`mesh_sim.lockstep.run_lockstep`) so that i
 from __future__ import annotations
 
 import functools
-import time
 import uuid
 from collections import Counter, deque
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import psutil
 import pytest
 from scipy.stats import chi2
 
@@ -28,6 +26,7 @@ from mesh_sim.launcher import Launcher, new_run_dir
 from mesh_sim.lockstep import agent_subscriptions, run_lockstep
 from mesh_sim.scenario import load
 from mesh_sim.world import World
+from tests.processes import assert_all_gone
 
 STATE_DIM = 6
 
@@ -44,14 +43,6 @@ def anees_upper_bound(runs: int, level: float = 0.95) -> float:
     return float(chi2.ppf(0.5 + level / 2, dof) / dof)
 
 
-def assert_all_gone(pids, timeout: float = 15.0) -> None:
-    """Every process in ``pids`` has exited (checked by PID, never by name)."""
-    deadline = time.time() + timeout
-    alive = set(pids)
-    while alive and time.time() < deadline:
-        alive = {p for p in alive if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE}
-        time.sleep(0.1)
-    assert not alive, f"processes left running: {sorted(alive)}"
 
 
 # ------------------------------------------------------------------------------------------------------
