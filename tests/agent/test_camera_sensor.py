@@ -69,10 +69,12 @@ def test_sensor_config_kinds():
 
 
 def test_a_sensor_override_of_another_kind_replaces_the_section():
-    # default.toml has geometric-bearing settings; switching the kind must not carry them over
-    camera = load("default", sensor={"kind": "camera", "width": 320, "height": 240}).agent.sensor
+    # default.toml has camera settings; switching the kind must not carry them over
+    bearing = load("default", sensor={"kind": "bearing", "range": 123.0}).agent.sensor
+    assert isinstance(bearing, BearingSensorConfig) and bearing.range == 123.0
+    camera = load("default", sensor={"width": 320, "height": 240}).agent.sensor  # same kind: merged
     assert isinstance(camera, CameraSensorConfig) and (camera.width, camera.height) == (320, 240)
-    assert load("default", sensor={"p_detect": 1.0}).agent.sensor.range == 200.0  # same kind: merged
+    assert camera.hfov == pytest.approx(math.radians(90.0))  # the rest of the section is kept
     assert isinstance(load("camera", sensor={"kind": "bearing"}).agent.sensor, BearingSensorConfig)
     assert load("camera", sensor={"gps_latency": 0.43}).agent.sensor.width == 640
 
