@@ -15,3 +15,13 @@ def assert_all_gone(pids, timeout: float = 15.0) -> None:
         alive = {p for p in alive if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE}
         time.sleep(0.1)
     assert not alive, f"processes left running: {sorted(alive)}"
+
+
+def assert_no_children_left(timeout: float = 10.0) -> None:
+    """No child process of this test process is still running after ``timeout`` seconds."""
+    deadline = time.time() + timeout
+    children = psutil.Process().children(recursive=True)
+    while children and time.time() < deadline:
+        children = [c for c in children if c.is_running() and c.status() != psutil.STATUS_ZOMBIE]
+        time.sleep(0.1)
+    assert children == [], f"processes left running: {[(c.pid, c.cmdline()) for c in children]}"

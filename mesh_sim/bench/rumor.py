@@ -40,7 +40,8 @@ until they fail their own association gates; new tracks start beside them, are e
 number of tracks explodes (measured: ~100 tracks per agent for 3 targets after 40 s, ~500 after 15 s for
 ``exact`` on the full graph, with a step cost growing accordingly). A run in which an agent holds more than
 ``DIVERGED_TRACKS`` tracks is stopped there (:func:`_stop_on_divergence`) and scored up to that time; the
-table says how many runs of a cell diverged and when.
+table says how many runs of a cell diverged and when. Likewise a run in which an agent raises (a defect:
+an agent must never crash on input) is stopped at that step and the exception is reported.
 
 **Goals** (from the issue), for ``hybrid`` in every cell: consistent (ANEES <= upper bound), RMSE within
 1.1x the oracle's on lossless trees and within 1.5x everywhere else. A diagnostic run of the lossless
@@ -59,6 +60,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import traceback
 from collections import Counter
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -67,6 +69,7 @@ from pathlib import Path
 from mesh_sim.bench import common
 
 NAME = "rumor"
+_REPO = Path(__file__).resolve().parents[2]
 TOPOLOGIES = ("tree", "ring", "full", "random")
 LOSSES = (0.0, 0.1, 0.3, 0.6)
 POLICIES = ("naive", "exact", "ci", "hybrid")
@@ -119,7 +122,8 @@ def _one(job: dict) -> dict:
         "job": job,
         "step": scenario.agent.step,
         "t_end": scenario.agent.duration if guard.stopped_at is None else guard.stopped_at,
-        "diverged_at": guard.stopped_at, "max_tracks": guard.max_tracks,
+        "diverged_at": guard.stopped_at if guard.error is None else None, "max_tracks": guard.max_tracks,
+        "crashed_at": guard.stopped_at if guard.error is not None else None, "error": guard.error,
         "agent_targets": [t for a in agents for t in a.get("targets", [])],
         "per_target_samples": _max_samples(agents),
         "oracle_targets": metrics["oracle"].get("targets", []),
@@ -133,6 +137,7 @@ def _one(job: dict) -> dict:
 class _Guard:
     stopped_at: float | None = None
     max_tracks: int = 0
+    error: str | None = None  # set when an agent raised (a defect of the agent: it must not crash on input)
 
 
 @contextmanager
@@ -158,7 +163,11 @@ def _stop_on_divergence(limit: int | None = None) -> Iterator[_Guard]:
             if guard.stopped_at is not None:
                 self.transport.drain()
                 return
-            super().step(t)
+            try:
+                super().step(t)
+            except Exception as err:  # noqa: BLE001 - reported per run, the run's scores up to here are kept
+                guard.stopped_at, guard.error = t, f"{self.id}: {_where(err)}"
+                return
             guard.max_tracks = max(guard.max_tracks, len(self.tracker.tracks))
             if len(self.tracker.tracks) > limit:
                 guard.stopped_at = t
@@ -175,6 +184,15 @@ def _stop_on_divergence(limit: int | None = None) -> Iterator[_Guard]:
         yield guard
     finally:
         lockstep.Agent, lockstep.World = base_agent, base_world
+
+
+def _where(err: BaseException) -> str:
+    """``Type: message (agent frame -> innermost frame)``, frames inside this repository."""
+    frames = [f for f in traceback.extract_tb(err.__traceback__) if _REPO in Path(f.filename).parents]
+    name = [f"{Path(f.filename).relative_to(_REPO)}:{f.lineno} {f.name}" for f in frames]
+    agent = [n for n in name if n.startswith("agent/")]
+    chain = list(dict.fromkeys(agent[-1:] + name[-1:]))
+    return f"{type(err).__name__}: {str(err)[:120]}" + (f" ({' -> '.join(chain)})" if chain else "")
 
 
 def _max_samples(agents: list[dict]) -> dict:
@@ -412,6 +430,7 @@ def _summarise(cell: tuple, outcomes: list[dict], duration: float, agents: int) 
         rejected.update(o.get("rejected", {}))
     agent_s = agents * sum(o["t_end"] for o in outcomes)  # a diverged run counts until it was stopped
     diverged = [o["diverged_at"] for o in outcomes if o["diverged_at"] is not None]
+    crashed = [o["crashed_at"] for o in outcomes if o.get("crashed_at") is not None]
     total_fusions = sum(fusions.values())
     return {
         "topology": topology, "loss": loss, "policy": policy, "seeds": sorted(o["job"]["scenario"]["seed"]
@@ -429,6 +448,8 @@ def _summarise(cell: tuple, outcomes: list[dict], duration: float, agents: int) 
         "rejected": dict(rejected),
         "diverged_runs": len(diverged), "diverged_first_at": min(diverged, default=None),
         "max_tracks_per_agent": max(o["max_tracks"] for o in outcomes),
+        "crashed_runs": len(crashed), "crashed_first_at": min(crashed, default=None),
+        "errors": sorted({o["error"] for o in outcomes if o.get("error")}),
         "tracked_by_all": all(o["tracked_by_all"] for o in outcomes),
         "mean_hops": sum(o["hops"][0] for o in outcomes) / len(outcomes),
         "max_hops": max(o["hops"][1] for o in outcomes),
@@ -443,17 +464,18 @@ def _goals(rows: list[dict]) -> dict:
         limit = TREE_GOAL if r["topology"] == "tree" and r["loss"] == 0.0 else OTHER_GOAL
         rmse_ok = bool(math.isfinite(r["rmse_ratio"]) and r["rmse_ratio"] <= limit)
         r["goal_rmse_limit"], r["goal_rmse_pass"], r["goal_consistent_pass"] = limit, rmse_ok, r["consistent"]
-        r["goal_pass"] = rmse_ok and r["consistent"] and not r["diverged_runs"]
+        r["goal_pass"] = rmse_ok and r["consistent"] and not r["diverged_runs"] and not r["crashed_runs"]
         cells.append({
             "topology": r["topology"], "loss": r["loss"], "rmse_ratio": r["rmse_ratio"], "rmse_limit": limit,
             "rmse_excess": r["rmse_ratio"] / limit - 1.0 if math.isfinite(r["rmse_ratio"]) else None,
             "anees": r["anees"], "anees_hi": r["anees_hi"], "rmse_pass": rmse_ok, "consistent": r["consistent"],
-            "diverged_runs": r["diverged_runs"], "pass": r["goal_pass"],
+            "diverged_runs": r["diverged_runs"], "crashed_runs": r["crashed_runs"], "pass": r["goal_pass"],
         })
     return {
         "description": f"hybrid: ANEES <= the upper {CONFIDENCE:.0%} chi-square bound in every cell; RMSE <= "
         f"{TREE_GOAL}x the oracle's on lossless trees and <= {OTHER_GOAL}x elsewhere",
-        "hybrid_consistent_everywhere": all(c["consistent"] and not c["diverged_runs"] for c in cells)
+        "hybrid_consistent_everywhere": all(c["consistent"] and not c["diverged_runs"] and not c["crashed_runs"]
+                                            for c in cells)
         if cells else None,
         "hybrid_rmse_lossless_tree": next((c["rmse_pass"] for c in cells
                                            if c["topology"] == "tree" and c["loss"] == 0.0), None),
@@ -527,9 +549,13 @@ def _f(value, spec: str, suffix: str = "") -> str:
 
 
 def _tracked(r: dict, seeds: int) -> str:
+    out = []
     if r["diverged_runs"]:
-        return (f"[red]diverged {r['diverged_runs']}/{seeds} @ {r['diverged_first_at']:.0f} s "
-                f"({r['max_tracks_per_agent']} tracks)[/red]")
+        out.append(f"diverged {r['diverged_runs']}/{seeds} @ {r['diverged_first_at']:.0f} s")
+    if r.get("crashed_runs"):
+        out.append(f"crashed {r['crashed_runs']}/{seeds} @ {r['crashed_first_at']:.0f} s")
+    if out:
+        return f"[red]{', '.join(out)}[/red]"
     return "yes" if r["tracked_by_all"] else "[red]no[/red]"
 
 
@@ -574,8 +600,12 @@ def report(result: dict, console=None) -> None:
         "'down' are messages from non-neighbours (the bus reaches everyone; the topology does not). hops: "
         "mean/largest hop distance between agents. all tracked: every agent tracked every target; 'diverged k/S @ t' "
         f"= k of S runs stopped when an agent held more than {DIVERGED_TRACKS} tracks (double counting makes tracks "
-        "fail their own gates and multiply), scores up to that time. goal: hybrid's (below).",
+        "fail their own gates and multiply), 'crashed' = an agent raised (listed below); scores up to that time. "
+        "goal: hybrid's (below).",
     )
+    errors = sorted({(e, r["policy"]) for r in result["rows"] for e in r.get("errors", [])})
+    for error, policy in errors:
+        console.print(f"[red]agent raised[/red] ({policy}): {error}", highlight=False)
     g = result["goals"]
     console.print(f"Goal: {g['description']}.", highlight=False)
     console.print(
@@ -592,6 +622,8 @@ def report(result: dict, console=None) -> None:
             why.append(f"ANEES {m['anees']:.2f} > {m['anees_hi']:.2f}")
         if m["diverged_runs"]:
             why.append(f"{m['diverged_runs']} run(s) diverged")
+        if m["crashed_runs"]:
+            why.append(f"{m['crashed_runs']} run(s) crashed")
         console.print(f"  [red]MISS[/red] {m['topology']} {100 * m['loss']:.0f} % loss: {'; '.join(why)}")
     for d in result.get("diagnostics", []):
         base = next((r for r in result["rows"] if (r["topology"], r["loss"], r["policy"]) ==

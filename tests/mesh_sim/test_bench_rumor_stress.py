@@ -7,41 +7,11 @@ Zenoh router. Each test checks that nothing it started is still alive afterwards
 
 from __future__ import annotations
 
-import io
 import math
-import tempfile
-import time
-
-import psutil
-import pytest
-from rich.console import Console
 
 from mesh_sim.bench import rumor, stress
 from mesh_sim.radio import compile_plan
-
-
-def _no_children_left(timeout: float = 10.0) -> None:
-    deadline = time.time() + timeout
-    children = psutil.Process().children(recursive=True)
-    while children and time.time() < deadline:
-        children = [c for c in children if c.is_running() and c.status() != psutil.STATUS_ZOMBIE]
-        time.sleep(0.1)
-    assert children == [], f"processes left running: {[(c.pid, c.cmdline()) for c in children]}"
-
-
-def _printed(module, result) -> str:
-    out = io.StringIO()
-    module.report(result, Console(file=out, width=220))
-    return out.getvalue()
-
-
-@pytest.fixture
-def private_tmp(tmp_path, monkeypatch):
-    """Temporary folders of the code under test go here, so the test can check they were removed."""
-    folder = tmp_path / "tmp"
-    folder.mkdir()
-    monkeypatch.setattr(tempfile, "tempdir", str(folder))
-    return folder
+from tests.processes import assert_no_children_left
 
 
 def test_anees_interval_and_independent_samples():
@@ -51,6 +21,20 @@ def test_anees_interval_and_independent_samples():
     assert lo1 < lo and hi1 > hi  # fewer samples, wider interval
     # 40 s tracked at 0.2 s steps = 200 samples -> 4 blocks of 10 s; a target seen once still counts once
     assert rumor.independent_samples({"a": 200, "b": 1, "c": 0}, 0.2) == 5
+
+
+def test_a_run_whose_tracks_explode_is_stopped_and_scored_until_then(monkeypatch):
+    from mesh_sim import lockstep
+
+    agent_cls, world_cls = lockstep.Agent, lockstep.World
+    monkeypatch.setattr(rumor, "DIVERGED_TRACKS", 1)  # any second track counts as an explosion
+    job = {"cell": ("ring", 0.0, "naive"),
+           "scenario": {"topology": "ring", "loss": 0.0, "policy": "naive", "seed": 1, "agents": 3, "duration": 6.0}}
+    out = rumor._one(job)
+    assert (lockstep.Agent, lockstep.World) == (agent_cls, world_cls)  # restored
+    assert out["diverged_at"] is not None and out["t_end"] == out["diverged_at"] < 6.0
+    assert out["crashed_at"] is None and out["error"] is None and out["max_tracks"] >= 2
+    assert out["oracle_targets"] and max(out["per_target_samples"].values()) <= out["t_end"] / out["step"] + 1
 
 
 def test_churn_events_are_deterministic_and_valid():
@@ -66,10 +50,10 @@ def test_churn_events_are_deterministic_and_valid():
     assert len(plan["phases"]) > 1
 
 
-def test_rumor_smallest_run(tmp_path):
+def test_rumor_smallest_run(tmp_path, printed):
     result = rumor.run(quick=True, topologies=("ring",), losses=(0.0,), policies=("naive", "hybrid"), seeds=1,
                        duration=8.0, agents=4, workers=2, plot_dir=tmp_path / "plot")
-    _no_children_left()
+    assert_no_children_left()
     assert result["benchmark"] == "rumor"
     assert {"settings", "environment", "rows", "goals", "plot", "diagnostics"} <= set(result)
     rows = {r["policy"]: r for r in result["rows"]}
@@ -86,13 +70,13 @@ def test_rumor_smallest_run(tmp_path):
     assert [c["topology"] for c in goals["cells"]] == ["ring"] and goals["hybrid_rmse_lossless_tree"] is None
     assert goals["pass"] == (goals["cells"][0]["rmse_pass"] and goals["cells"][0]["consistent"])
     assert (tmp_path / "plot" / "rumor.png").stat().st_size > 0
-    text = _printed(rumor, result)
+    text = printed(rumor, result)
     assert "naive" in text and "hybrid" in text and "rumor.png" in text
 
 
-def test_stress_smallest_run(private_tmp):
+def test_stress_smallest_run(private_tmp, printed):
     result = stress.run(quick=True, caps=(2000,), agents=3, duration=8.0)
-    _no_children_left()
+    assert_no_children_left()
     assert list(private_tmp.iterdir()) == []  # the run folders were removed
     assert result["benchmark"] == "stress"
     rows = result["rows"]
@@ -109,5 +93,5 @@ def test_stress_smallest_run(private_tmp):
     assert rows[1]["delivered_bytes_per_agent_s"] < rows[0]["delivered_bytes_per_agent_s"]
     assert {"breaks_at_cap", "holds_down_to_cap", "results"} <= set(result["goals"])
     assert result["settings"]["churn_events"]
-    text = _printed(stress, result)
+    text = printed(stress, result)
     assert "unlimited" in text and "2 kB/s" in text

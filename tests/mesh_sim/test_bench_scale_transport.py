@@ -6,48 +6,25 @@ that nothing it started is still alive afterwards (by PID, via psutil).
 
 from __future__ import annotations
 
-import io
 import json
 import math
-import tempfile
-import time
 
 import psutil
 import pytest
-from rich.console import Console
 
 from mesh_sim.bench import common, scale, transport
-
-
-def _no_children_left(timeout: float = 10.0) -> None:
-    deadline = time.time() + timeout
-    children = psutil.Process().children(recursive=True)
-    while children and time.time() < deadline:
-        children = [c for c in children if c.is_running() and c.status() != psutil.STATUS_ZOMBIE]
-        time.sleep(0.1)
-    assert children == [], f"processes left running: {[(c.pid, c.cmdline()) for c in children]}"
+from tests.processes import assert_no_children_left
 
 
 def _positive(value) -> bool:
     return isinstance(value, int | float) and math.isfinite(value) and value > 0
 
 
-def _printed(module, result) -> str:
-    out = io.StringIO()
-    module.report(result, Console(file=out, width=200))
-    return out.getvalue()
 
 
-@pytest.fixture
-def private_tmp(tmp_path, monkeypatch):
-    """Temporary folders of the code under test go here, so the test can check they were removed."""
-    folder = tmp_path / "tmp"
-    folder.mkdir()
-    monkeypatch.setattr(tempfile, "tempdir", str(folder))
-    return folder
 
 
-def test_scale_smallest_run_structure_and_cleanup(private_tmp):
+def test_scale_smallest_run_structure_and_cleanup(private_tmp, printed):
     # The geometric sensor with a wide view, so that tracks are confirmed and shared within 4 s.
     wide = {"sensor": {"kind": "bearing", "range": 400.0, "fov_deg": 150.0}}
     result = scale.run(quick=True, sizes=(2,), duration=4.0, overrides=wide)
@@ -70,10 +47,10 @@ def test_scale_smallest_run_structure_and_cleanup(private_tmp):
     assert goals["largest_N_under_1pct"] in (None, 2)
     assert goals["largest_N_under_1pct"] == (2 if row["meets_goal"] else None)
     json.dumps(common._finite(result))  # JSON-serialisable once non-finite floats become null
-    text = _printed(scale, result)
+    text = printed(scale, result)
     assert "largest N" in text and "Live scale" in text
     assert not [p for p in private_tmp.iterdir() if p.name.startswith("skymesh-bench-scale-")], "run folders left"
-    _no_children_left()
+    assert_no_children_left()
 
 
 def test_scale_rejects_bad_settings():
@@ -83,7 +60,7 @@ def test_scale_rejects_bad_settings():
         scale.run(quick=True, sizes=(2,), duration=-1.0)
 
 
-def test_transport_smallest_run_structure_and_cleanup():
+def test_transport_smallest_run_structure_and_cleanup(printed):
     result = transport.run(quick=True, repeats=2, round_trips=200, burst=300)
     assert result["benchmark"] == "transport"
     rows = {r["path"]: r for r in result["rows"]}
@@ -105,14 +82,14 @@ def test_transport_smallest_run_structure_and_cleanup():
     assert result["goals"]["agent_over_bare"] == result["ratios"]
     assert _positive(result["codec"]["encode"]) and _positive(result["codec"]["decode"])
     json.dumps(common._finite(result))
-    assert "agent ÷ bare" in _printed(transport, result)
+    assert "agent ÷ bare" in printed(transport, result)
     echo = result["settings"]["echo_pid"]
     assert not psutil.pid_exists(echo) or psutil.Process(echo).status() == psutil.STATUS_ZOMBIE
-    _no_children_left()
+    assert_no_children_left()
 
 
 def test_transport_rejects_bad_settings():
     for bad in ({"round_trips": 0}, {"burst": -1}, {"repeats": 0}, {"poll_sleep": -1.0}):
         with pytest.raises(ValueError):
             transport.run(quick=True, **bad)
-    _no_children_left()
+    assert_no_children_left()
