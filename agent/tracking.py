@@ -337,7 +337,10 @@ class Tracker:
                 if keep_id not in self.tracks or drop_id not in self.tracks:
                     continue
                 keep, drop = self.tracks[keep_id], self.tracks[drop_id]
-                if self._track_distance(keep.estimate(), drop.estimate()) >= self.config.track_gate:
+                try:
+                    if self._track_distance(keep.estimate(), drop.estimate()) >= self.config.track_gate:
+                        continue
+                except UninformativeBeliefError:  # not fully observable: it cannot be compared, so it is not merged
                     continue
                 epoch = max(keep.belief.epoch, drop.belief.epoch)
                 keep.belief = intersect_on_newest(keep.belief.advanced_to(epoch), drop.belief.advanced_to(epoch))

@@ -449,7 +449,7 @@ def _summarise(cell: tuple, outcomes: list[dict], duration: float, agents: int) 
         "diverged_runs": len(diverged), "diverged_first_at": min(diverged, default=None),
         "max_tracks_per_agent": max(o["max_tracks"] for o in outcomes),
         "crashed_runs": len(crashed), "crashed_first_at": min(crashed, default=None),
-        "errors": sorted({o["error"] for o in outcomes if o.get("error")}),
+        "errors": [o["error"] for o in outcomes if o.get("error")],
         "tracked_by_all": all(o["tracked_by_all"] for o in outcomes),
         "mean_hops": sum(o["hops"][0] for o in outcomes) / len(outcomes),
         "max_hops": max(o["hops"][1] for o in outcomes),
@@ -551,9 +551,9 @@ def _f(value, spec: str, suffix: str = "") -> str:
 def _tracked(r: dict, seeds: int) -> str:
     out = []
     if r["diverged_runs"]:
-        out.append(f"diverged {r['diverged_runs']}/{seeds} @ {r['diverged_first_at']:.0f} s")
+        out.append(f"diverged {r['diverged_runs']}/{seeds} @{r['diverged_first_at']:.0f} s")
     if r.get("crashed_runs"):
-        out.append(f"crashed {r['crashed_runs']}/{seeds} @ {r['crashed_first_at']:.0f} s")
+        out.append(f"raised {r['crashed_runs']}/{seeds} @{r['crashed_first_at']:.0f} s")
     if out:
         return f"[red]{', '.join(out)}[/red]"
     return "yes" if r["tracked_by_all"] else "[red]no[/red]"
@@ -600,12 +600,18 @@ def report(result: dict, console=None) -> None:
         "'down' are messages from non-neighbours (the bus reaches everyone; the topology does not). hops: "
         "mean/largest hop distance between agents. all tracked: every agent tracked every target; 'diverged k/S @ t' "
         f"= k of S runs stopped when an agent held more than {DIVERGED_TRACKS} tracks (double counting makes tracks "
-        "fail their own gates and multiply), 'crashed' = an agent raised (listed below); scores up to that time. "
+        "fail their own gates and multiply), 'raised' = an agent raised an exception (below); scores up to that time. "
         "goal: hybrid's (below).",
     )
-    errors = sorted({(e, r["policy"]) for r in result["rows"] for e in r.get("errors", [])})
-    for error, policy in errors:
-        console.print(f"[red]agent raised[/red] ({policy}): {error}", highlight=False)
+    errors: dict[str, list[tuple[str, int]]] = {}  # message -> [(cell, runs)]
+    for r in result["rows"]:
+        for message in dict.fromkeys(e.partition(": ")[2] for e in r.get("errors", [])):
+            errors.setdefault(message, []).append((f"{r['topology']} {100 * r['loss']:.0f} % {r['policy']}",
+                                                   r.get("crashed_runs", 0)))
+    for message, where in errors.items():
+        cells = "; ".join(f"{cell} x{n}" for cell, n in where)
+        console.print(f"[red]an agent raised[/red] in {sum(n for _, n in where)} run(s) ({cells}): {message}",
+                      highlight=False)
     g = result["goals"]
     console.print(f"Goal: {g['description']}.", highlight=False)
     console.print(

@@ -537,3 +537,17 @@ def test_naive_fusion_on_the_same_run_is_not_centralized():
     ((_, fused),) = steps[-1][1].estimates()
     ((_, centralized),) = central.estimates()
     assert np.linalg.eigvalsh(fused.Y[:3, :3]).max() > 2.0 * np.linalg.eigvalsh(centralized.Y[:3, :3]).max()
+
+
+def test_merge_skips_a_track_that_is_not_fully_observable():
+    """Bad state (found by the rumor benchmark under exact fusion on loops): a confirmed track whose belief
+    is singular must be skipped by duplicate merging, not crash the agent."""
+    from fusion.trajectory import Trajectory
+    from perception.terrain import FlatTerrain
+
+    tracker = Tracker(TrackerConfig(), 0.2, FlatTerrain())
+    for _ in range(2):
+        track = tracker._new_track(Trajectory.prior(tracker.model, 0))  # the prior: no position information
+        track.confirmed = True
+    assert tracker.merge_duplicates() == 0
+    assert len(tracker.tracks) == 2
