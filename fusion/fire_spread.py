@@ -36,7 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import logit
 
-from fusion.grid import GridGeometry, LogOddsGrid
+from fusion.grid import LogOddsGrid
+from fusion.grid_geometry import GridGeometry
 
 #: Per-step probability that a burning cell becomes completely burnt, beta in (6.4) (chosen here).
 BURN = 0.05

@@ -23,19 +23,8 @@ filter reproduces centralized fusion to rounding error. Default ``clamp = 0.999`
 with weighted counts is exactly the weighted exponential product of two Betas (an exponential family
 with natural parameters ``alpha - 1, beta - 1``).
 
-**Intersection rules** for loops (pass one as ``ChannelFilter(intersect=...)``):
-
-* :func:`chernoff_intersect`: per cell the Chernoff weight ``w*`` of the weighted exponential product,
-  where ``KL(p_w || p_a) = KL(p_w || p_b)`` (Hurley 2002, "An information theoretic justification for
-  covariance intersection and its generalization"; Julier 2006, "An empirical study into the use of
-  Chernoff information for robust, distributed fusion of Gaussian mixture models"). With
-  ``psi(w) = log ∫ p_a^w p_b^(1-w)`` (convex), ``KL(p_w||p_a) - KL(p_w||p_b) = E_w[log p_b - log p_a]
-  = -psi'(w)``, which decreases from ``KL(p_b||p_a) >= 0`` to ``-KL(p_a||p_b) <= 0``: a vectorised bisection
-  finds its root. The same rule serves both grids (for Beta, ``E_w[log x] = digamma(alpha_w) -
-  digamma(alpha_w + beta_w)``). Minimum-variance weights were not used for Beta: they pick an endpoint
-  under conflicting opinions — Merino's "dictatorship" rule, which §4.1.3 rejects.
-* :func:`max_intersect`: Merino (4.5) ``max(l_a, l_b)`` and (4.39) ``max(alpha)``, ``max(beta)`` per cell.
-* :func:`half_intersect`: ``w = 1/2``.
+The intersection rules for loops are in :mod:`fusion.grid_intersect`, the geometry in
+:mod:`fusion.grid_geometry`.
 
 Every rule is a per-cell convex combination (or the max) of the inputs, so where all evidence of a cell
 has one sign no node can become more confident than the centralized grid. Grids are immutable, and
@@ -44,145 +33,15 @@ static: ``epoch`` is ``None`` and ``advanced_to`` returns the grid itself.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
-from dataclasses import dataclass
-
 import numpy as np
 from scipy.special import betaln, digamma, expit, log_expit, logit
+
+from fusion.grid_geometry import GridGeometry, GridGeometryError, real_number
 
 #: Default read-time probability clamp: cells read within [1 - clamp, clamp] (chosen here).
 DEFAULT_CLAMP = 0.999
 #: Tolerance below zero that Beta ``remove`` rounds to zero rather than rejecting (chosen here).
 REMOVE_TOLERANCE = 1e-9
-#: Bisection steps for the Chernoff weight: 2^-40 ~ 1e-12 in omega (chosen here).
-CHERNOFF_ITERATIONS = 40
-#: Largest grid accepted, guarding memory against a corrupt geometry off the wire (chosen here: 4096^2).
-MAX_CELLS = 4096 * 4096
-#: Relative slack in :meth:`GridGeometry.covering` so a span of exactly n cells does not get n + 1 (chosen here).
-COVER_RTOL = 1e-9
-
-
-class GridGeometryError(ValueError):
-    """A grid geometry is invalid, two grids do not share a geometry, or a point lies off the grid."""
-
-
-def _real(value, name: str, error: type[ValueError] = ValueError) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise error(f"{name} must be a real number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise error(f"{name} must be finite, got {value}")
-    return value
-
-
-def _pair(value, name: str) -> tuple[float, float]:
-    if not isinstance(value, list | tuple | np.ndarray) or len(value) != 2:
-        raise GridGeometryError(f"{name} must be a pair of numbers, got {value!r}")
-    return _real(value[0], f"{name}[0]", GridGeometryError), _real(value[1], f"{name}[1]", GridGeometryError)
-
-
-@dataclass(frozen=True)
-class GridGeometry:
-    """A rectangular grid on flat ground: rows along north, columns along east (NED)."""
-
-    origin: tuple[float, float]  # (north, east) of the grid's corner with the smallest coordinates [m]
-    cell: float  # cell side [m], > 0
-    shape: tuple[int, int]  # (rows, cols), each >= 1
-    height: float = 0.0  # NED down coordinate of the cell centres [m]
-
-    def __post_init__(self):
-        origin = _pair(self.origin, "origin")
-        cell = _real(self.cell, "cell size", GridGeometryError)
-        if cell <= 0.0:
-            raise GridGeometryError(f"cell size must be positive, got {cell}")
-        shape = self.shape
-        if not isinstance(shape, list | tuple | np.ndarray) or len(shape) != 2:
-            raise GridGeometryError(f"shape must be a pair (rows, cols), got {shape!r}")
-        for name, n in zip(("rows", "cols"), shape, strict=True):
-            if isinstance(n, bool) or not isinstance(n, int | np.integer):
-                raise GridGeometryError(f"shape {name} must be an integer, got {n!r}")
-            if n < 1:
-                raise GridGeometryError(f"shape {name} must be at least 1, got {n}")
-        shape = (int(shape[0]), int(shape[1]))
-        if shape[0] * shape[1] > MAX_CELLS:
-            raise GridGeometryError(f"grid of {shape[0]}x{shape[1]} cells exceeds MAX_CELLS = {MAX_CELLS}")
-        object.__setattr__(self, "origin", origin)
-        object.__setattr__(self, "cell", cell)
-        object.__setattr__(self, "shape", shape)
-        object.__setattr__(self, "height", _real(self.height, "height", GridGeometryError))
-
-    @property
-    def size(self) -> int:
-        return self.shape[0] * self.shape[1]
-
-    def centres(self) -> np.ndarray:
-        """``(rows, cols, 2)``: north, east of every cell centre, ``origin + (index + 1/2) cell``."""
-        north = self.origin[0] + (np.arange(self.shape[0]) + 0.5) * self.cell
-        east = self.origin[1] + (np.arange(self.shape[1]) + 0.5) * self.cell
-        return np.stack(np.meshgrid(north, east, indexing="ij"), axis=-1)
-
-    def centres_ned(self) -> np.ndarray:
-        """``(rows*cols, 3)``: the 3-D cell centres ``r_k`` (north, east, height), row-major."""
-        flat = self.centres().reshape(-1, 2)
-        return np.column_stack([flat, np.full(self.size, self.height)])
-
-    def cell_of(self, north: float, east: float) -> tuple[int, int]:
-        """The (row, col) holding a point. Cells are half-open except on the far edges, which belong to
-        the last row/column, so every point of ``[origin, origin + shape * cell]`` has a cell."""
-        index = []
-        for name, value, start, n in zip(("north", "east"), (north, east), self.origin, self.shape, strict=True):
-            value = _real(value, name, GridGeometryError)
-            if not start <= value <= start + n * self.cell:
-                raise GridGeometryError(
-                    f"{name} = {value} lies outside the grid [{start}, {start + n * self.cell}]"
-                )
-            index.append(min(max(int(math.floor((value - start) / self.cell)), 0), n - 1))
-        return index[0], index[1]
-
-    def check_same(self, other: GridGeometry) -> None:
-        """Raise :class:`GridGeometryError` naming the first field in which ``other`` differs."""
-        if not isinstance(other, GridGeometry):
-            raise GridGeometryError(f"expected a GridGeometry, got {type(other).__name__}")
-        for name in ("shape", "cell", "origin", "height"):
-            mine, theirs = getattr(self, name), getattr(other, name)
-            if mine != theirs:
-                raise GridGeometryError(f"grid geometry mismatch: {name} {mine} vs {theirs}")
-
-    def to_dict(self) -> dict:
-        """Plain JSON/msgpack types."""
-        return {"origin": list(self.origin), "cell": self.cell, "shape": list(self.shape), "height": self.height}
-
-    @classmethod
-    def from_dict(cls, d) -> GridGeometry:
-        """Inverse of :meth:`to_dict`; rejects missing or unknown keys and bad values."""
-        if not isinstance(d, Mapping):
-            raise GridGeometryError(f"grid geometry must be a mapping, got {type(d).__name__}")
-        missing = {"origin", "cell", "shape"} - set(d)
-        unknown = set(d) - {"origin", "cell", "shape", "height"}
-        if missing or unknown:
-            raise GridGeometryError(
-                f"grid geometry keys: missing {sorted(missing)}, unknown {sorted(map(str, unknown))}"
-            )
-        return cls(d["origin"], d["cell"], d["shape"], d.get("height", 0.0))
-
-    @classmethod
-    def covering(
-        cls, north: tuple[float, float], east: tuple[float, float], cell: float, height: float = 0.0
-    ) -> GridGeometry:
-        """The smallest grid with corner ``(north[0], east[0])`` that covers both closed ranges."""
-        cell = _real(cell, "cell size", GridGeometryError)
-        if cell <= 0.0:
-            raise GridGeometryError(f"cell size must be positive, got {cell}")
-        shape = []
-        for name, bounds in (("north", north), ("east", east)):
-            lo, hi = _pair(bounds, f"{name} range")
-            if hi < lo:
-                raise GridGeometryError(f"{name} range is reversed: {lo} > {hi}")
-            shape.append(max(1, math.ceil((hi - lo) / cell * (1.0 - COVER_RTOL))))
-        return cls((_pair(north, "north range")[0], _pair(east, "east range")[0]), cell, tuple(shape), height)
-
-
 # -- shared checks -----------------------------------------------------------------------------------
 def _field(value, name: str, shape: tuple[int, int]) -> np.ndarray:
     """A finite float64 array of ``shape``, copied and made read-only."""
@@ -230,7 +89,7 @@ def _cells(index, values: list, names: list[str], size: int) -> tuple[np.ndarray
 
 def _omega(omega, shape: tuple[int, int]) -> np.ndarray | float:
     if np.ndim(omega) == 0:
-        w = _real(omega if not isinstance(omega, np.ndarray) else float(omega), "omega")
+        w = real_number(omega if not isinstance(omega, np.ndarray) else float(omega), "omega")
         if not 0.0 <= w <= 1.0:
             raise ValueError(f"omega must lie in [0, 1], got {w}")
         return w
@@ -241,7 +100,7 @@ def _omega(omega, shape: tuple[int, int]) -> np.ndarray | float:
 
 
 def _unit(value, name: str) -> float:
-    value = _real(value, name)
+    value = real_number(value, name)
     if not 0.0 <= value <= 1.0:
         raise ValueError(f"{name} must lie in [0, 1], got {value}")
     return value
@@ -287,7 +146,7 @@ class LogOddsGrid(_Grid):
                  clamp: float = DEFAULT_CLAMP):
         if not isinstance(geometry, GridGeometry):
             raise GridGeometryError(f"geometry must be a GridGeometry, got {type(geometry).__name__}")
-        prior, clamp = _real(prior, "prior"), _real(clamp, "clamp")
+        prior, clamp = real_number(prior, "prior"), real_number(clamp, "clamp")
         if not 0.0 < prior < 1.0:
             raise ValueError(f"prior must lie in (0, 1), got {prior}")
         if not 0.5 < clamp < 1.0:
@@ -362,7 +221,7 @@ class LogOddsGrid(_Grid):
 
     def scaled(self, w: float) -> LogOddsGrid:
         """``w e`` (the belief to the power ``w``), ``w >= 0``."""
-        w = _real(w, "scale weight")
+        w = real_number(w, "scale weight")
         if w < 0.0:
             raise ValueError(f"scale weight must be non-negative, got {w}")
         return self._like(w * self.evidence)
@@ -387,7 +246,7 @@ class BetaGrid(_Grid):
                  alpha0: float = 1.0, beta0: float = 1.0):
         if not isinstance(geometry, GridGeometry):
             raise GridGeometryError(f"geometry must be a GridGeometry, got {type(geometry).__name__}")
-        alpha0, beta0 = _real(alpha0, "alpha0"), _real(beta0, "beta0")
+        alpha0, beta0 = real_number(alpha0, "alpha0"), real_number(beta0, "beta0")
         if alpha0 <= 0.0 or beta0 <= 0.0:
             raise ValueError(f"the Beta prior must be positive, got alpha0={alpha0}, beta0={beta0}")
         self.geometry, self.alpha0, self.beta0 = geometry, alpha0, beta0
@@ -482,7 +341,7 @@ class BetaGrid(_Grid):
         return self._like(w * self.alpha + (1.0 - w) * other.alpha, w * self.beta + (1.0 - w) * other.beta)
 
     def scaled(self, w: float) -> BetaGrid:
-        w = _real(w, "scale weight")
+        w = real_number(w, "scale weight")
         if w < 0.0:
             raise ValueError(f"scale weight must be non-negative, got {w}")
         return self._like(w * self.alpha, w * self.beta)
@@ -496,59 +355,3 @@ class BetaGrid(_Grid):
         lo, hi = self._probability_range()
         prior = f"({self.alpha0}, {self.beta0})"
         return f"BetaGrid(shape={self.geometry.shape}, prior={prior}, mean in [{lo:.3g}, {hi:.3g}])"
-
-
-# -- intersection rules for loops ----------------------------------------------------------------------
-def _same_grids(a, b) -> None:
-    if not isinstance(a, LogOddsGrid | BetaGrid):
-        raise ValueError(f"expected a LogOddsGrid or a BetaGrid, got {type(a).__name__}")
-    a._check(b)
-
-
-def chernoff_weights(a: LogOddsGrid | BetaGrid, b: LogOddsGrid | BetaGrid) -> np.ndarray:
-    """Per-cell Chernoff weight ``w`` on ``a``: the root of ``E_w[log p_b - log p_a] = KL(p_w||p_a) -
-    KL(p_w||p_b)``, decreasing in ``w`` (module docstring), by ``CHERNOFF_ITERATIONS`` bisection steps.
-    Cells where the two agree have no unique root; any ``w`` gives the same result there."""
-    _same_grids(a, b)
-    if isinstance(a, LogOddsGrid):
-        la, lb = a._l0 + a.evidence, b._l0 + b.evidence  # unclamped: the weights act on the stored evidence
-        d_pos, d_neg = log_expit(lb) - log_expit(la), log_expit(-lb) - log_expit(-la)
-
-        def excess(w):
-            p = expit(w * la + (1.0 - w) * lb)
-            return p * d_pos + (1.0 - p) * d_neg
-    else:
-        (aa, ba), (ab, bb) = a.shape_parameters(), b.shape_parameters()
-        d_norm = betaln(aa, ba) - betaln(ab, bb)
-
-        def excess(w):
-            aw, bw = w * aa + (1.0 - w) * ab, w * ba + (1.0 - w) * bb
-            log_x, log_1mx = digamma(aw) - digamma(aw + bw), digamma(bw) - digamma(aw + bw)
-            return (ab - aa) * log_x + (bb - ba) * log_1mx + d_norm
-
-    lo, hi = np.zeros(a.geometry.shape), np.ones(a.geometry.shape)
-    for _ in range(CHERNOFF_ITERATIONS):
-        mid = 0.5 * (lo + hi)
-        above = excess(mid) > 0.0
-        lo, hi = np.where(above, mid, lo), np.where(above, hi, mid)
-    return 0.5 * (lo + hi)
-
-
-def chernoff_intersect(a, b):
-    """Weighted exponential product at the per-cell Chernoff point (Hurley 2002; Julier 2006)."""
-    w = chernoff_weights(a, b)
-    return a.intersect(b, w)
-
-
-def max_intersect(a, b):
-    """Merino (4.5) per-cell ``max(l_a, l_b)``; (4.39) per-cell ``max`` of the alpha and of the beta counts."""
-    _same_grids(a, b)
-    if isinstance(a, LogOddsGrid):
-        return a._like(np.maximum(a.evidence, b.evidence))
-    return a._like(np.maximum(a.alpha, b.alpha), np.maximum(a.beta, b.beta))
-
-
-def half_intersect(a, b):
-    """``omega = 1/2``."""
-    _same_grids(a, b)
-    return a.intersect(b, 0.5)

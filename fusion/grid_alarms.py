@@ -24,7 +24,7 @@ import numpy as np
 from scipy import ndimage
 
 from fusion.gaussian import Gaussian
-from fusion.grid import GridGeometry, GridGeometryError
+from fusion.grid_geometry import GridGeometry, GridGeometryError
 
 #: Alarm threshold on the cell probability: Merino's example value (§4.1.3: "alarm threshold 0.8").
 DEFAULT_THRESHOLD = 0.8

@@ -16,7 +16,8 @@ from hypothesis.extra.numpy import arrays
 from scipy.special import expit
 
 from fusion.fire_spread import BURNT_PRIOR, FIRE_PRIOR, FireBelief, FireSpreadModel
-from fusion.grid import GridGeometry, GridGeometryError, LogOddsGrid
+from fusion.grid import LogOddsGrid
+from fusion.grid_geometry import GridGeometry, GridGeometryError
 
 SHAPE = (5, 5)
 GEOM = GridGeometry((0.0, 0.0), 20.0, SHAPE)

@@ -19,16 +19,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.special import betaln
 
-from fusion.grid import (
-    BetaGrid,
-    GridGeometry,
-    GridGeometryError,
-    LogOddsGrid,
-    chernoff_intersect,
-    chernoff_weights,
-    half_intersect,
-    max_intersect,
-)
+from fusion.grid import BetaGrid, LogOddsGrid
+from fusion.grid_geometry import GridGeometry, GridGeometryError
+from fusion.grid_intersect import chernoff_intersect, chernoff_weights, half_intersect, max_intersect
 from fusion.network import FilterNetwork
 from tests.fusion.builders import complete, random_tree, ring
 

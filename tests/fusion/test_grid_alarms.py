@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 from fusion.gaussian import Gaussian
-from fusion.grid import GridGeometry, GridGeometryError, LogOddsGrid, chernoff_intersect, half_intersect, max_intersect
+from fusion.grid import LogOddsGrid
 from fusion.grid_alarms import Alarm, extract_alarms
+from fusion.grid_geometry import GridGeometry, GridGeometryError
+from fusion.grid_intersect import chernoff_intersect, half_intersect, max_intersect
 
 GEOM = GridGeometry((0.0, 0.0), 10.0, (5, 6))
 
