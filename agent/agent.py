@@ -23,6 +23,8 @@ from agent import wire
 from agent.camera_sensor import sensor_from_config
 from agent.config import AgentScenario
 from agent.evaluation import TrackEvaluator
+from agent.fire_mapping import FireMapper
+from agent.fire_truth import decode_fire
 from agent.netem import LinkEmulator
 from agent.sending import SendScheduler
 from agent.sensing import Bearing
@@ -31,6 +33,7 @@ from agent.tracking import RemoteTrack, Tracker
 from agent.transport import Keys
 from agent.vehicle import goal_to_setpoint, vehicle_from_config
 from perception.terrain import terrain_from_config
+from tasking.entropy import EntropyPlanner, EntropyPlannerConfig
 from tasking.planner import PlaceholderPlanner
 
 log = logging.getLogger("skymesh.agent")
@@ -43,6 +46,7 @@ TRACK_ENTRY_BYTES = 5000  # budget charged per track sent: an 8-state trajectory
 @dataclass
 class Counters:
     bytes_tx: Counter  # kind -> bytes
+    sim_bytes_tx: Counter  # kind -> bytes of simulation-only data (raw measurements for the oracles)
     bytes_rx: Counter  # (peer, kind) -> bytes
     rejected: Counter  # reason -> messages
     fusions: Counter  # method -> remote tracks fused
@@ -68,14 +72,13 @@ class Agent:
         self.vehicle = vehicle_from_config(scenario.vehicle, scenario.start_position(index), 0.0)
         self.sensor = sensor_from_config(scenario.sensor, seed, self.terrain, camera)
         self.sensor_outcomes: Counter = Counter()  # reason -> bearings the agent could not use
-        self.tracker = Tracker(scenario.tracking, scenario.step, self.terrain)
-        tasking = {"search": "lawnmower", "spacing": 60.0, "orbit_radius": 40.0, **scenario.tasking}
-        self.planner = PlaceholderPlanner(
-            index, scenario.agents, scenario.area.as_tuple(), scenario.altitude, seed=seed, **tasking
-        )
+        self.tracker = Tracker(scenario.tracking, scenario.step, self.terrain, seed=seed + 104729)
+        self.mapper = None if scenario.grid is None else FireMapper(
+            agent_id, scenario.grid, scenario.area.as_tuple(), self.terrain, seed + 7919)
+        self.planner = _planner(scenario, index, seed, self.mapper)
         self.evaluator = TrackEvaluator()
         self.topology = Topology(agent_id)
-        self.counters = Counters(Counter(), Counter(), Counter(), Counter(), Counter(), [])
+        self.counters = Counters(Counter(), Counter(), Counter(), Counter(), Counter(), Counter(), [])
         plan = scenario.radio_plan
         self.link = None if plan is None else LinkEmulator(agent_id, plan)
         self.sender = SendScheduler(scenario.sending, None if plan is None else plan.sender_budget(agent_id))
@@ -83,11 +86,13 @@ class Agent:
         self._order = 0
         self._uav_positions: dict[str, np.ndarray] = {}
         self.telemetry_thinned = 0
+        self.grids_thinned = 0
         self.steps = 0
         self._seq = 0
         self._last_seq: dict[tuple[str, str], int] = {}  # (origin, kind) -> last seq accepted
         self._logged: set[tuple[str, str]] = set()
         self._truth: tuple[float, list[dict]] | None = None
+        self._fire: tuple[list, list] = ([], [])  # burning cells and decoys (hot spot, probability), as scene fires
         self.last_bearings: list[Bearing] = []
 
     # -- the loop -------------------------------------------------------------------------------
@@ -100,14 +105,24 @@ class Agent:
         self.tracker.update(bearings)
         self.last_bearings = bearings
         self._publish_measurements(t, bearings)
+        if self.mapper is not None:
+            self._publish_grid_evidence(t, self.mapper.sense(state, *self._fire))
         for item in self.transport.drain():
             self.receive(item, t)
         self._release_delayed(t)
         self._publish_telemetry(t, state, bearings)
         if self.sender.due(t):
             self._publish_tracks(t)
+        if self.mapper is not None:
+            self.mapper.update_alarms(t)
+            if self.mapper.due(t):
+                self._publish_grid(t)
         estimates = self.tracker.estimates()
-        goal = self.planner.plan(state.position, [(tid, est.mean[:2]) for tid, est in estimates])
+        if isinstance(self.planner, EntropyPlanner):
+            beta = self.mapper.grid.shape_parameters() if self.mapper.config.belief == "beta" else None
+            goal = self.planner.plan(state.position, self.mapper.probability(), self.mapper.geometry.centres(), beta)
+        else:
+            goal = self.planner.plan(state.position, [(tid, est.mean[:2]) for tid, est in estimates])
         self.vehicle.set_setpoint(goal_to_setpoint(goal))
         self.vehicle.step(self.scenario.step)
         if truth is not None:
@@ -175,12 +190,21 @@ class Agent:
     def _deliver(self, env: wire.Envelope, size: int, t: float) -> None:
         """A message that made it through the radio: count it and use it."""
         self.counters.bytes_rx[(env.origin, env.kind)] += size
-        if env.kind in ("track", "telemetry"):
+        if env.kind in ("track", "telemetry", "grid"):
             self.topology.heard(env.origin, t)
         if env.kind == "telemetry":
             self.topology.learn(env.payload.get("topology"))
         if env.kind == "track":
             self._fuse_tracks(env, t)
+        if env.kind == "grid" and self.mapper is not None:
+            self._fuse_grid(env, t)
+
+    def _fuse_grid(self, env: wire.Envelope, t: float) -> None:
+        try:
+            method = self.mapper.receive(env.origin, env.seq, env.payload, self.topology.is_tree_edge(env.origin, t))
+        except wire.DecodeError as err:
+            return self._reject(env.origin, err.reason)
+        self.counters.fusions[f"grid_{method}"] += 1
 
     def _fuse_tracks(self, env: wire.Envelope, t: float) -> None:
         try:
@@ -215,6 +239,12 @@ class Agent:
         targets = env.payload.get("targets")
         if isinstance(targets, list):
             self._truth = (env.stamp, targets)
+        if self.mapper is not None and "fire" in env.payload:
+            try:
+                fire = decode_fire(env.payload["fire"], self.terrain)
+                self._fire = (fire.scene_fires(self.terrain), _decoys(env.payload.get("decoys", [])))
+            except wire.DecodeError as err:
+                self._reject("world", err.reason)
         uavs = env.payload.get("uavs")
         if isinstance(uavs, dict):  # the simulator's knowledge of where everyone is: the radio's range check
             self._uav_positions = {k: np.asarray(v, float) for k, v in uavs.items() if k != self.id}
@@ -247,6 +277,11 @@ class Agent:
         self.transport.publish(key, data)
         self.counters.bytes_tx[kind] += len(data)
 
+    def _send_to_simulator(self, key: str, kind: str, data: bytes) -> None:
+        """Simulation-only data for the centralized references: not radio traffic, counted apart."""
+        self.transport.publish(key, data)
+        self.counters.sim_bytes_tx[kind] += len(data)
+
     def _publish_tracks(self, t: float) -> None:
         chosen = self.sender.choose(t, self.tracker.confirmed(), TRACK_ENTRY_BYTES)
         if not chosen:
@@ -269,11 +304,31 @@ class Agent:
             "topology": self.topology.gossip(t),
             "tracks": [{"id": tid, "mean": est.mean, "cov": est.cov} for tid, est in self.tracker.estimates()],
         }
+        if self.tracker.initiator is not None:
+            payload["particles"] = self.tracker.initiator.points()
+        if self.mapper is not None:
+            payload["alarms"] = [{"mean": a.mean, "cov": a.cov, "probability": a.probability}
+                                 for a in self.mapper.alarms]
         data = self._envelope("telemetry", t, payload)
         if self.sender.admit(len(data), t):
             self._send(self.keys.telemetry(self.id), "telemetry", data)
         else:
             self.telemetry_thinned += 1
+
+    def _publish_grid(self, t: float) -> None:
+        payload, quantized = self.mapper.outgoing(self.topology.neighbours(t))
+        data = self._envelope("grid", t, payload)
+        if not self.sender.admit(len(data), t):
+            self.grids_thinned += 1
+            return
+        self.mapper.sent(self._seq, payload, quantized)
+        self._send(self.keys.belief("grid", self.id), "grid", data)
+
+    def _publish_grid_evidence(self, t: float, evidence) -> None:
+        """This frame's cell evidence for the centralized map (simulation only, like the raw bearings)."""
+        payload = {"index": evidence.index.astype(np.int32), "llr": evidence.llr, "m": evidence.m, "n": evidence.n}
+        self._send_to_simulator(self.keys.sim(f"grid_evidence/{self.id}"), "grid_evidence",
+                                self._envelope("grid_evidence", t, payload))
 
     def _publish_measurements(self, t: float, bearings: list[Bearing]) -> None:
         """Raw bearings for the centralized oracle (simulation only; a real fleet does not send these)."""
@@ -282,7 +337,8 @@ class Agent:
                 {"t": b.t, "sensor": b.sensor, "azel": b.azel, "R": b.R, "truth": b.truth_id} for b in bearings
             ]
         }
-        self._send(self.keys.sim(f"measurement/{self.id}"), "measurement", self._envelope("measurement", t, payload))
+        self._send_to_simulator(self.keys.sim(f"measurement/{self.id}"), "measurement",
+                                self._envelope("measurement", t, payload))
 
     # -- results --------------------------------------------------------------------------------
     def metrics(self) -> dict:
@@ -293,6 +349,7 @@ class Agent:
             "bytes_tx": int(sum(self.counters.bytes_tx.values())),
             "bytes_rx": int(sum(self.counters.bytes_rx.values())),
             "bytes_tx_by_kind": dict(self.counters.bytes_tx),
+            "sim_bytes_tx_by_kind": dict(self.counters.sim_bytes_tx),
             "bytes_rx_by_peer": _by_peer(self.counters.bytes_rx),
             "msgs_rejected": int(sum(v for k, v in self.counters.rejected.items() if k != "duplicate")),
             "rejected_by_reason": dict(self.counters.rejected),
@@ -309,7 +366,36 @@ class Agent:
             "targets": self.evaluator.summary(),
             "sensor": self.sensor.metrics(),
             "sensor_outcomes": dict(Counter(self.sensor.metrics()["outcomes"]) + self.sensor_outcomes),
+            **({} if self.tracker.initiator is None else {"particle_init": self.tracker.initiator.metrics()}),
+            **({} if self.mapper is None else {"grid": {**self.mapper.metrics(), "thinned": self.grids_thinned}}),
         }
+
+
+def _planner(scenario: AgentScenario, index: int, seed: int, mapper):
+    """``[tasking] planner``: ``"placeholder"`` (search, then orbit a target) or ``"entropy"`` (the
+    information-gain explorer of Merino (4.21)-(4.24) over the agent's fire map; needs ``[grid]``)."""
+    tasking = dict(scenario.tasking)
+    kind = tasking.pop("planner", "placeholder")
+    if kind == "entropy":
+        if mapper is None:
+            raise ValueError("tasking.planner = entropy needs a [grid] section (it explores the fire map)")
+        config = EntropyPlannerConfig(pd=mapper.config.detection.pd, pf=mapper.config.detection.pf, **tasking)
+        return EntropyPlanner(config, scenario.area.as_tuple(), scenario.altitude)
+    if kind != "placeholder":
+        raise ValueError(f"tasking.planner must be placeholder or entropy, got {kind!r}")
+    tasking = {"search": "lawnmower", "spacing": 60.0, "orbit_radius": 40.0, **tasking}
+    return PlaceholderPlanner(index, scenario.agents, scenario.area.as_tuple(), scenario.altitude, seed=seed, **tasking)
+
+
+def _decoys(entries) -> list[tuple[float, float, float]]:
+    """``[[north, east, probability], ...]`` from the truth: hot spots that show in a frame with that
+    probability (malformed entries are ignored: advisory simulation data)."""
+    out = []
+    for entry in entries if isinstance(entries, list) else []:
+        if isinstance(entry, list | tuple) and len(entry) == 3 and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in entry):
+            out.append((float(entry[0]), float(entry[1]), float(entry[2])))
+    return out
 
 
 def _by_peer(counter: Counter) -> dict:

@@ -15,16 +15,17 @@ from pathlib import Path
 import numpy as np
 
 from agent.camera_sensor import CameraSensorConfig, sensor_config_from_dict
+from agent.grid_config import GridConfig
 from agent.netem import LinkPlan
 from agent.sending import SendConfig
 from agent.sensing import BearingSensorConfig
 from agent.tracking import TrackerConfig
 
 #: Top-level keys that the world reads; the agent accepts and ignores them.
-WORLD_KEYS = frozenset({"targets", "radio", "description"})
+WORLD_KEYS = frozenset({"targets", "radio", "description", "fire", "decoys"})
 AGENT_KEYS = frozenset(
     {"name", "duration", "agents", "rate_hz", "altitude", "area", "origin", "terrain", "vehicle",
-     "sensor", "tracking", "sending", "tasking", "seed", "radio_plan"}
+     "sensor", "tracking", "sending", "tasking", "seed", "radio_plan", "grid"}
 )
 
 
@@ -60,6 +61,7 @@ class AgentScenario:
     sending: SendConfig = field(default_factory=SendConfig)
     tasking: dict = field(default_factory=dict)
     radio_plan: LinkPlan | None = None  # compiled by the simulator from the scenario's [radio]; None: ideal links
+    grid: GridConfig | None = None  # [grid]: a certainty grid (fire map) built and shared; None: no grid
 
     def __post_init__(self):
         for name in ("duration", "rate_hz", "altitude"):
@@ -102,6 +104,8 @@ class AgentScenario:
             kwargs["tracking"] = _dataclass_from_dict(TrackerConfig, d["tracking"], "tracking")
         if "sending" in d:
             kwargs["sending"] = _dataclass_from_dict(SendConfig, d["sending"], "sending")
+        if "grid" in d:
+            kwargs["grid"] = GridConfig.from_dict(d["grid"])
         if d.get("radio_plan") is not None:
             kwargs["radio_plan"] = LinkPlan.from_dict(d["radio_plan"])
         return cls(**kwargs)

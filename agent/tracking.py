@@ -20,7 +20,9 @@ decentralized fusion equals the centralized filter exactly.
   Confirmed tracks have the first claim on the detections inside their gates.
 * **Initiation**: a detection outside every gate starts a *tentative* track at the ground point of
   its ray (``perception.geolocation``), with an unscented-transform covariance and a broad velocity
-  prior. A track is confirmed after ``confirm_hits`` updates and is only then shared; one that is
+  prior. With ``initiation = "particles"`` it starts a particle candidate along the ray instead, which
+  becomes a track once it has converged to one compact cloud (:mod:`agent.particle_init`, Merino §5.3).
+  A track is confirmed after ``confirm_hits`` updates and is only then shared; one that is
   confirmed inside the track-to-track gate of another confirmed track is a duplicate and is dropped.
 * **Track-to-track** (Merino (3.65)): a peer's track is matched to the local track minimising
   ``(mu_i - mu_j)^T (P_i + P_j)^-1 (mu_i - mu_j)`` over positions, gated; the match is kept in a
@@ -42,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from agent.particle_init import ParticleInitConfig, ParticleInitiator
 from agent.sensing import Bearing
 from fusion.channel_filter import ChannelFilter, Received
 from fusion.gaussian import Gaussian, UninformativeBeliefError
@@ -73,8 +76,17 @@ class TrackerConfig:
     terrain_sigma: float = 2.0  # DEM error [m]; chosen here
     sensor_sigma: float = 0.5  # camera position error [m] (GPS); chosen here
     policy: str = "hybrid"
+    initiation: str = "ray"  # "ray" (the ray's ground point) or "particles" (agent.particle_init, Merino §5.3)
+    particle_init: ParticleInitConfig = field(default_factory=ParticleInitConfig)  # [tracking.particle_init]
 
     def __post_init__(self):
+        if isinstance(self.particle_init, dict):
+            unknown = set(self.particle_init) - set(ParticleInitConfig.__dataclass_fields__)
+            if unknown:
+                raise ValueError(f"unknown tracking.particle_init settings: {sorted(unknown)}")
+            object.__setattr__(self, "particle_init", ParticleInitConfig(**self.particle_init))
+        if self.initiation not in ("ray", "particles"):
+            raise ValueError(f"tracking.initiation must be ray or particles, got {self.initiation!r}")
         positive = ("gate", "track_gate", "max_position_std", "tau", "q", "vertical_q", "stale_after", "speed_std",
                     "vertical_speed_std")
         for name in positive:
@@ -127,8 +139,9 @@ class Track:
 class Tracker:
     """All tracks of one agent (or of the centralized oracle, with ``by_label=True`` updates)."""
 
-    def __init__(self, config: TrackerConfig, step: float, terrain):
+    def __init__(self, config: TrackerConfig, step: float, terrain, seed: int = 0):
         self.config = config
+        self.initiator = ParticleInitiator(config.particle_init, seed) if config.initiation == "particles" else None
         self.terrain = terrain
         if config.motion == "damped":
             motion = DampedVelocity(3, config.speed_std, config.tau, config.vertical_speed_std)
@@ -167,7 +180,7 @@ class Tracker:
     # -- own measurements -----------------------------------------------------------------------
     def update(self, bearings: list[Bearing], by_label: bool = False) -> dict[str, int]:
         """Associate and apply this step's bearings. Returns counts of what happened to them."""
-        counts = {"updated": 0, "initiated": 0, "unused": 0}
+        counts = {"updated": 0, "initiated": 0, "unused": 0} | ({} if self.initiator is None else {"candidate": 0})
         if by_label:
             pairs = self._pairs_by_label(bearings)
         else:
@@ -193,11 +206,28 @@ class Tracker:
                 continue
             if (by_label and bearing.truth_id is None) or (not by_label and self._inside_any_gate(bearing)):
                 counts["unused"] += 1
+            elif self.initiator is not None and not by_label:
+                self.initiator.offer(bearing)
+                counts["candidate"] += 1
             elif self._initiate(bearing) is not None:
                 counts["initiated"] += 1
             else:
                 counts["unused"] += 1
+        if self.initiator is not None:
+            for handover in self.initiator.ready(self.epoch * self.model.step):
+                self._hand_over(handover)
+                counts["initiated"] += 1
         return counts
+
+    def _hand_over(self, handover) -> None:
+        """A converged particle candidate becomes a track: its Gaussian is the first position measurement."""
+        track = self._start_track(handover.position.mean, handover.position.cov, 0, handover.truth_id,
+                                  handover.last_measured)
+        track.hits = handover.hits
+        if track.hits >= self.config.confirm_hits:
+            track.confirmed = True
+            if self._duplicate(track):
+                self._delete(track.id)
 
     def _duplicate(self, track: Track) -> bool:
         """Does a track that has just been confirmed pass the track-to-track gate with another confirmed
@@ -280,18 +310,21 @@ class Tracker:
         located = self._geolocate(bearing)
         if located is None:
             return None
+        return self._start_track(located[0], located[1], self._offset(bearing), bearing.truth_id, bearing.t)
+
+    def _start_track(self, position, cov, offset: int, truth_id, last_measured: float) -> Track:
+        """A tentative track whose first information is a position measurement ``N(position, cov)``."""
         c = self.config
         belief = Trajectory.prior(self.model, self.epoch)
-        offset = self._offset(bearing)
-        where = PositionMeasurement(STATE_DIM, located[1])
-        belief = belief.update(where.H, where.R_inv, located[0], offset)
+        where = PositionMeasurement(STATE_DIM, cov)
+        belief = belief.update(where.H, where.R_inv, position, offset)
         if c.motion == "constant_velocity":  # no stationary velocity in the prior: add a local pseudo-prior
             speed_cov = np.diag([c.speed_std**2, c.speed_std**2, c.vertical_speed_std**2])
             H_v = np.hstack([np.zeros((3, 3)), np.eye(3)])
             belief = belief.update(H_v, np.linalg.inv(speed_cov), np.zeros(3), offset)
         track = self._new_track(belief)
-        track.truth_id = bearing.truth_id
-        track.last_measured = bearing.t
+        track.truth_id = truth_id
+        track.last_measured = last_measured
         return track
 
     def _new_track(self, belief: Trajectory) -> Track:

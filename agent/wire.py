@@ -48,8 +48,8 @@ from fusion.trajectory import Trajectory, TrajectoryModel
 SCHEMA_VERSION = 1
 
 #: Message kinds this module knows. Another module extends the set without touching this one:
-#: ``decode(data, kinds=wire.KINDS | {"grid"})``.
-KINDS: frozenset[str] = frozenset({"track", "telemetry", "measurement", "truth", "clock"})
+#: ``decode(data, kinds=wire.KINDS | {"particles"})``.
+KINDS: frozenset[str] = frozenset({"track", "telemetry", "measurement", "truth", "clock", "grid", "grid_evidence"})
 
 REASONS: frozenset[str] = frozenset(
     {
@@ -65,6 +65,16 @@ REASONS: frozenset[str] = frozenset(
         "indefinite",  # information matrix not symmetric positive semi-definite
         "origin_mismatch",  # origin differs from the one the transport expected (the key's agent)
         "bad_mac",  # HMAC missing, malformed or wrong while a fleet key is configured
+        # grid messages (agent.grid_codec, agent.grid_exchange)
+        "grid_bad_mode",  # neither a keyframe nor a delta
+        "grid_bad_shape",  # layers or cells other than the receiver's grid geometry
+        "grid_bad_index",  # delta cell indices out of range, not increasing, or of a bad dtype
+        "grid_bad_values",  # NaN/inf values, or a value count that does not match the indices
+        "grid_missing_baseline",  # a delta on a message the receiver does not hold
+        "grid_corrupt",  # compressed bytes that do not decompress, or byte counts that do not add up
+        "grid_stale",  # a grid message not newer than the last one decoded from that origin
+        "grid_geometry",  # a grid whose geometry differs from the receiver's
+        "bad_fire",  # malformed fire truth (agent.fire_truth)
     }
 )
 

@@ -55,16 +55,31 @@ def _field(value, name: str, shape: tuple[int, int]) -> np.ndarray:
 
 
 def _frozen(arr: np.ndarray, name: str) -> np.ndarray:
-    if not np.isfinite(arr).all():
+    # one reduction without a temporary: a NaN or inf anywhere makes the sum non-finite (a sum that
+    # overflows although every value is finite is told apart by the exact, slower check)
+    with np.errstate(over="ignore"):
+        suspicious = not np.isfinite(arr.sum())
+    if suspicious and not np.isfinite(arr).all():
         raise ValueError(f"{name} contains non-finite values (NaN or inf) in {int((~np.isfinite(arr)).sum())} cells")
     arr.setflags(write=False)
     return arr
 
 
+def _operand(value, name: str, shape: tuple[int, int]) -> np.ndarray:
+    """A float64 view (no copy when it already is one) of an update operand of ``shape``; its finiteness is
+    checked on the result, which is non-finite whenever the operand is."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numeric, got {type(value).__name__}") from None
+    if arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape} (the grid's), got {arr.shape}")
+    return arr
+
+
 def _non_negative(arr: np.ndarray, name: str) -> np.ndarray:
-    bad = int((arr < 0.0).sum())
-    if bad:
-        raise ValueError(f"{name} has {bad} negative cell counts (evidence counts must be >= 0)")
+    if arr.size and arr.min() < 0.0:  # NaN never compares below zero: the finiteness check catches it
+        raise ValueError(f"{name} has {int((arr < 0.0).sum())} negative cell counts (evidence counts must be >= 0)")
     return arr
 
 
@@ -162,11 +177,12 @@ class LogOddsGrid(_Grid):
         """Every cell at the prior (Merino Alg. 4.3, line 1)."""
         return cls(geometry, None, prior, clamp)
 
-    def _like(self, evidence: np.ndarray) -> LogOddsGrid:
+    def _like(self, evidence: np.ndarray, operand: str = "the operand") -> LogOddsGrid:
+        """A grid with ``evidence`` (the result of an operation on ``operand``, named in errors)."""
         new = object.__new__(LogOddsGrid)
         new.geometry, new.prior, new.clamp, new._l0, new._lmax = (
             self.geometry, self.prior, self.clamp, self._l0, self._lmax)
-        new.evidence = _frozen(evidence, "evidence (result)")
+        new.evidence = _frozen(evidence, f"evidence after adding {operand}")
         return new
 
     # -- reading --------------------------------------------------------------------------------------
@@ -196,7 +212,8 @@ class LogOddsGrid(_Grid):
     # -- updates and the algebra ------------------------------------------------------------------------
     def update(self, llr: np.ndarray) -> LogOddsGrid:
         """Alg. 4.2: ``e + log p(z|x) - log p(z|x̄)`` for every cell."""
-        return self._like(self.evidence + _field(llr, "llr", self.geometry.shape))
+        llr = _operand(llr, "llr", self.geometry.shape)
+        return self._like(self.evidence + llr, "llr")
 
     def update_cells(self, index: np.ndarray, llr: np.ndarray) -> LogOddsGrid:
         """Alg. 4.2 on some cells: flat row-major ``index``; repeated indices accumulate."""
@@ -259,10 +276,12 @@ class BetaGrid(_Grid):
         """No evidence yet; ``alpha0 = beta0 = 1`` is Merino's uninformed prior (Alg. 4.5, line 1)."""
         return cls(geometry, None, None, alpha0, beta0)
 
-    def _like(self, alpha: np.ndarray, beta: np.ndarray) -> BetaGrid:
+    def _like(self, alpha: np.ndarray, beta: np.ndarray, operand: str = "the operand") -> BetaGrid:
+        """A grid with these counts (the result of an operation on ``operand``, named in errors)."""
         new = object.__new__(BetaGrid)
         new.geometry, new.alpha0, new.beta0 = self.geometry, self.alpha0, self.beta0
-        new.alpha, new.beta = _frozen(alpha, "alpha (result)"), _frozen(beta, "beta (result)")
+        new.alpha = _frozen(alpha, f"alpha after adding {operand}")
+        new.beta = _frozen(beta, f"beta after adding {operand}")
         return new
 
     def shape_parameters(self) -> tuple[np.ndarray, np.ndarray]:
@@ -304,8 +323,8 @@ class BetaGrid(_Grid):
     def update(self, m: np.ndarray, n: np.ndarray) -> BetaGrid:
         """Alg. 4.4 (4.29)-(4.30): ``a += m`` detections, ``b += n`` non-detections (fractional allowed)."""
         shape = self.geometry.shape
-        m, n = _non_negative(_field(m, "m", shape), "m"), _non_negative(_field(n, "n", shape), "n")
-        return self._like(self.alpha + m, self.beta + n)
+        m, n = _non_negative(_operand(m, "m", shape), "m"), _non_negative(_operand(n, "n", shape), "n")
+        return self._like(self.alpha + m, self.beta + n, "m or n")
 
     def update_cells(self, index: np.ndarray, m: np.ndarray, n: np.ndarray) -> BetaGrid:
         """Alg. 4.4 on some cells: flat row-major ``index``; repeated indices accumulate."""

@@ -117,7 +117,7 @@ def _bench(args) -> int:
 def _run(args) -> int:
     from mesh_sim.launcher import Launcher, new_run_dir
     from mesh_sim.lockstep import run_lockstep
-    from mesh_sim.results import summary_table
+    from mesh_sim.results import grid_table, summary_table
     from mesh_sim.scenario import load
 
     console = make_console()
@@ -144,6 +144,8 @@ def _run(args) -> int:
         print(f"skymesh run: {err}", file=sys.stderr)
         return EXIT_USAGE
     console.print(summary_table(metrics))
+    if (fire_map := grid_table(metrics)) is not None:
+        console.print(fire_map)
     console.print(f"Results: {run_dir}  (metrics.json, plots/"
                   + (", logs/" if not args.lockstep else "")
                   + (", recording.rrd: open with `rerun recording.rrd`" if args.rerun == "save" else "") + ")",

@@ -78,4 +78,5 @@ def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off", cameras:
             "cpu_per_step_ms": 1e3 * wall / max(1, agent.steps * len(agents)),
         })
     write_json(run_dir / "oracle.json", {**world.summary(), "wall_s": wall})
+    world.save_maps(run_dir)
     return results.collect(run_dir, scenario, "completed", speed=sc.duration / max(wall, 1e-9))

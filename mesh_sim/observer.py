@@ -13,8 +13,11 @@ What is logged, on the ``sim_time`` timeline (a duration, from each envelope's s
     world/uav/<id>/path            LineStrips3D  its last PATH_POINTS positions
     world/agents/<id>/tracks       Ellipsoids3D  2-sigma position ellipsoids of the agent's tracks
     world/agents/<id>/rays         LineStrips3D  bearing rays from the UAV (RAY_LENGTH m or to z=0 ground)
+    world/agents/<id>/particles    Points3D      particles of the agent's track candidates (initiation = particles)
     world/links                    LineStrips3D  agent-neighbour links: green if both ends report the link,
                                                  orange if only one does
+    maps/<id>                      Image         the agent's fire map (cell probability), north up
+    maps/truth                     Image         the true fire: unburnt / burning / burnt cells
     metrics/<id>/tracks            Scalars       number of tracks the agent reports
     metrics/<id>/bytes_rx          Scalars       the agent's own received-bytes count, if its telemetry has one
     metrics/<id>/video_quality     Scalars       the camera's video-quality measure D(t), if its telemetry has one
@@ -53,6 +56,7 @@ import zenoh
 from agent import wire
 from agent.transport import Incoming, Keys, ZenohTransport, load_config
 from fusion.measurement import azel_to_los
+from mesh_sim.observer_grids import GridImages
 
 log = logging.getLogger("skymesh.observer")
 
@@ -210,6 +214,11 @@ def parse_telemetry(payload: dict) -> dict:
     rx = payload.get("bytes_rx")
     numeric = isinstance(rx, int | float) and not isinstance(rx, bool)
     out["bytes_rx"] = float(rx) if numeric and np.isfinite(rx) else None
+    particles = payload.get("particles")
+    p = _matrix(particles, "particles") if isinstance(particles, np.ndarray) else np.zeros((0, 3))
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise wire.DecodeError("bad_shape", "particles must be a (k, 3) float array")
+    out["particles"] = p
     vq = payload.get("video_quality")
     numeric = isinstance(vq, int | float) and not isinstance(vq, bool)
     out["video_quality"] = float(vq) if numeric and np.isfinite(vq) else None
@@ -240,6 +249,7 @@ class Observer:
         self._paths: dict[str, deque] = {}
         self._positions: dict[str, np.ndarray] = {}
         self._reports: dict[str, tuple[float, set[str]]] = {}  # agent -> (stamp, neighbours it reports)
+        self.grids = GridImages()
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
 
     # sinks ------------------------------------------------------------------------------------------
@@ -298,6 +308,8 @@ class Observer:
                 parsed = parse_truth(env.payload)
             elif kind == "telemetry":
                 parsed = parse_telemetry(env.payload)
+            elif kind == "grid":
+                parsed = self.grids.agent_image(env.origin, env.seq, env.payload)
             else:
                 parsed = None  # beliefs: counted as bandwidth (telemetry carries the marginals we draw)
         except wire.DecodeError as err:
@@ -308,11 +320,15 @@ class Observer:
         try:
             if kind == "truth":
                 self._log_truth(*parsed)
+                if "fire" in env.payload:
+                    self.rec.log("maps/truth", rr.Image(self.grids.truth_image(env.payload["fire"])))
             else:
                 self.bytes_seen[env.origin] += len(incoming.data)
                 self.rec.log(f"metrics/{env.origin}/bytes_seen", rr.Scalars(float(self.bytes_seen[env.origin])))
                 if kind == "telemetry":
                     self._log_telemetry(env.origin, env.stamp, parsed)
+                elif kind == "grid":
+                    self.rec.log(f"maps/{env.origin}", rr.Image(parsed))
         except Exception as err:  # a safety net: the observer never dies on input
             log.warning("observer: could not log a %s from %s: %s", kind, peer, err)
             self.rejected["log_error"] += 1
@@ -356,6 +372,8 @@ class Observer:
             quaternions=np.asarray(quats).reshape(-1, 4), colors=[colour] * len(labels), labels=labels,
             fill_mode=rr.components.FillMode.MajorWireframe))
 
+        if len(t["particles"]):
+            rec.log(f"world/agents/{agent}/particles", rr.Points3D(t["particles"], radii=0.4, colors=[colour]))
         rays = [np.array([pos, ray_end(pos, azel, self.ray_length)]) for azel in t["bearings"]]
         rec.log(f"world/agents/{agent}/rays", rr.LineStrips3D(rays, radii=0.15, colors=[colour] * len(rays)))
 

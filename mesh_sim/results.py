@@ -64,12 +64,63 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
         },
         "config": {**scenario.raw, "speed": speed},
     }
+    if "grid" in oracle:
+        metrics["fleet"]["grid"] = grid_fleet(agents, oracle["grid"], sc)
     write_json(run_dir / "metrics.json", metrics)
     try:
         plot(metrics, run_dir / "plots")
+        plot_fire_maps(run_dir / "fire_maps.npz", run_dir / "plots")
     except (OSError, ValueError) as err:  # a plot is a convenience; the metrics are already written
         Console(stderr=True).print(f"[yellow]plots skipped: {err}")
     return metrics
+
+
+def grid_fleet(agents: list[dict], grid: dict, sc) -> dict:
+    """Fleet fire-map figures at the alarm threshold: detection, decoy rejection, localisation, KL to the
+    centralized map, grid bytes per agent per second (Merino's field figures: > 95 %, > 80 %, < 1 m)."""
+    threshold = sc.grid.alarm_threshold
+    rows = [a_roc for a in grid["agents"].values() for a_roc in a["roc"] if a_roc["threshold"] == threshold]
+
+    def mean(key):
+        values = [r[key] for r in rows if r[key] is not None]
+        return float(np.mean(values)) if values else None
+
+    kl = [a["kl_final"] for a in grid["agents"].values() if a["kl_final"] is not None]
+    grid_bytes = [a["grid"]["grid_bytes"] for a in agents if "grid" in a]
+    return {
+        "threshold": threshold,
+        "detection_rate": mean("detection_rate"),
+        "false_alarm_rejection": mean("false_alarm_rejection"),
+        "localisation_error_m": mean("localisation_error_m"),
+        "other_false_alarms": mean("other_false_alarms"),
+        "kl_to_central": float(np.mean(kl)) if kl else None,
+        "grid_bytes_per_agent_per_s": float(np.mean(grid_bytes)) / sc.duration if grid_bytes else None,
+    }
+
+
+def grid_table(metrics: dict) -> Table | None:
+    """Per agent: its fire map against the truth and the centralized map (``None`` without a grid)."""
+    grid = metrics["oracle"].get("grid")
+    if not grid:
+        return None
+    threshold = metrics["fleet"]["grid"]["threshold"]
+    table = Table(title=f"fire map — alarms at p > {threshold:g}")
+    for col in ("agent", "fires found", "decoys rejected", "other false", "loc. error [m]", "KL to central",
+                "grid bytes/s", "grid msgs (key)"):
+        table.add_column(col, justify="right")
+    duration = metrics["config"]["duration"]
+    by_id = {a["id"]: a for a in metrics["agents"]}
+    for agent, g in grid["agents"].items():
+        r = next(x for x in g["roc"] if x["threshold"] == threshold)
+        m = by_id.get(agent, {}).get("grid", {})
+        table.add_row(agent, f"{r['detected']}/{r['fires']}", f"{r['decoys_rejected']}/{r['decoys']}",
+                      str(r["other_false_alarms"]), _fmt(r["localisation_error_m"], ".2f"), _fmt(g["kl_final"], ".1f"),
+                      _fmt(m.get("grid_bytes", 0) / duration, ",.0f"),
+                      f"{m.get('grid_messages', 0)} ({m.get('grid_keyframes', 0)})")
+    r = next(x for x in grid["central"]["roc"] if x["threshold"] == threshold)
+    table.add_row("central", f"{r['detected']}/{r['fires']}", f"{r['decoys_rejected']}/{r['decoys']}",
+                  str(r["other_false_alarms"]), _fmt(r["localisation_error_m"], ".2f"), "0", "", "", style="dim")
+    return table
 
 
 def _tails(targets: list[dict]) -> list[dict]:
@@ -140,4 +191,35 @@ def plot(metrics: dict, folder: Path) -> None:
     ax.legend(fontsize="small", ncols=2)
     fig.tight_layout()
     fig.savefig(folder / "rmse.png", dpi=100)
+    plt.close(fig)
+
+
+def plot_fire_maps(maps_file: Path, folder: Path) -> None:
+    """The true fire beside the centralized map and every agent's (``plots/fire_maps.png``)."""
+    if not maps_file.is_file():
+        return
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    maps = np.load(maps_file)
+    panels = [(k, maps[k]) for k in ("central", *sorted(k for k in maps.files if k.startswith("agent_")))]
+    fig, axes = plt.subplots(1, len(panels) + ("truth" in maps.files), figsize=(3.2 * (len(panels) + 1), 3.4),
+                             squeeze=False)
+    axes = list(axes[0])
+    n0, n1, e0, e1 = maps["extent"]
+    if "truth" in maps.files:
+        tn0, tn1, te0, te1 = maps["truth_extent"]
+        axes.pop(0).imshow(maps["truth"], origin="lower", extent=(te0, te1, tn0, tn1), cmap="hot_r", vmin=0, vmax=2)
+        fig.axes[0].set_title("truth (burning / burnt)")
+    for ax, (name, p) in zip(axes, panels, strict=True):
+        image = ax.imshow(p, origin="lower", extent=(e0, e1, n0, n1), cmap="inferno", vmin=0.0, vmax=1.0)
+        ax.set_title(name.removeprefix("agent_"))
+    for ax in fig.axes:
+        ax.set_xlabel("east [m]")
+    fig.axes[0].set_ylabel("north [m]")
+    fig.colorbar(image, ax=fig.axes, shrink=0.8, label="p(fire)")
+    folder.mkdir(exist_ok=True)
+    fig.savefig(folder / "fire_maps.png", dpi=90)
     plt.close(fig)

@@ -6,10 +6,12 @@ by their stem (``skymesh run --scenario default``); any other path is read as a 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 from agent.config import AgentScenario, read_scenario_file
+from mesh_sim.fire import FireConfig
 from mesh_sim.radio import compile_plan
 from mesh_sim.targets import targets_from_config
 from perception.terrain import terrain_from_config
@@ -23,6 +25,8 @@ class Scenario:
     raw: dict
     agent: AgentScenario
     targets: list
+    fire: FireConfig | None = None  # [fire]: the true fire (mesh_sim.fire); None: no fire
+    decoys: tuple = ()  # (north, east, probability per frame) hot spots that are not fires
 
     @property
     def name(self) -> str:
@@ -74,7 +78,25 @@ def load(name_or_path: str, **overrides) -> Scenario:
             raw["radio_plan"] = compile_plan(raw["radio"], agents, int(raw.get("seed", AgentScenario.seed)))
         agent = AgentScenario.from_dict(raw)
         targets = targets_from_config(raw.get("targets", []), terrain_from_config(agent.terrain))
+        fire = FireConfig.from_dict(raw["fire"], agent.area.as_tuple()) if "fire" in raw else None
+        decoys = parse_decoys(raw.get("decoys", []))
+        if fire is not None and agent.grid is None:
+            raise ValueError("[fire] needs a [grid] section: the agents map the fire with certainty grids")
     except (ValueError, TypeError, KeyError) as err:
         raise ValueError(f"{path}: {err}") from None
-    return Scenario(path, raw, agent, targets)
+    return Scenario(path, raw, agent, targets, fire, decoys)
+
+
+def parse_decoys(entries) -> tuple[tuple[float, float, float], ...]:
+    """``decoys = [[north, east, probability], ...]``: each a finite position and a probability in [0, 1]."""
+    if not isinstance(entries, list):
+        raise ValueError(f"decoys must be a list of [north, east, probability], got {entries!r}")
+    out = []
+    for k, entry in enumerate(entries):
+        ok = isinstance(entry, list) and len(entry) == 3 and all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in entry)
+        if not ok or not 0.0 <= entry[2] <= 1.0:
+            raise ValueError(f"decoys[{k}] must be [north, east, probability in 0..1], got {entry!r}")
+        out.append((float(entry[0]), float(entry[1]), float(entry[2])))
+    return tuple(out)
 

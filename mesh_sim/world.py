@@ -24,6 +24,8 @@ from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps,
 from agent.sensing import Bearing
 from agent.tracking import Tracker
 from agent.transport import Keys, ZenohTransport, load_config
+from mesh_sim.fire import FireWorld
+from mesh_sim.grid_oracle import GridOracle, grid_extent
 from mesh_sim.scenario import load
 from mesh_sim.targets import truth_snapshot
 from perception.terrain import terrain_from_config
@@ -92,16 +94,23 @@ class World:
         self.seq = 0
         self.uavs: dict[str, list] = {}  # agent -> last reported position (the radio's range check uses it)
         self.now = 0.0
+        sc = scenario.agent
+        terrain = terrain_from_config(sc.terrain)
+        self.fire = None if scenario.fire is None else FireWorld(scenario.fire, terrain, sc.seed)
+        self.grid_oracle = None if sc.grid is None else GridOracle(sc.grid, sc.area.as_tuple(), terrain)
 
     @staticmethod
     def subscriptions(keys: Keys) -> list[str]:
-        return [keys.sim("measurement/*"), keys.telemetry("*")]
+        return [keys.sim("measurement/*"), keys.telemetry("*"), keys.sim("grid_evidence/*"), keys.belief("grid", "*")]
 
     def publish_truth(self, t: float) -> None:
         self.now = t
         self.seq += 1
-        env = wire.Envelope(kind="truth", origin="world", seq=self.seq, stamp=t,
-                            payload={"targets": truth_snapshot(self.scenario.targets, t), "uavs": dict(self.uavs)})
+        payload = {"targets": truth_snapshot(self.scenario.targets, t), "uavs": dict(self.uavs)}
+        if self.fire is not None:
+            payload["fire"] = self.fire.payload(t)
+            payload["decoys"] = [list(d) for d in self.scenario.decoys]
+        env = wire.Envelope(kind="truth", origin="world", seq=self.seq, stamp=t, payload=payload)
         self.transport.publish(self.keys.sim("truth"), wire.encode(env))
 
     def absorb_measurements(self) -> None:
@@ -114,9 +123,14 @@ class World:
                 continue
             if env.kind == "telemetry":
                 self._note_position(env)
+            elif env.kind in ("grid", "grid_evidence"):
+                if self.grid_oracle is not None:
+                    (self.grid_oracle.add_grid if env.kind == "grid" else self.grid_oracle.add_evidence)(env)
             else:
                 self.oracle.add(env, self.now)
         self.oracle.evaluate(self.scenario.targets)
+        if self.grid_oracle is not None:
+            self.grid_oracle.evaluate(self.now)
 
     def _note_position(self, env: wire.Envelope) -> None:
         position = np.asarray(env.payload.get("position", ()), float)
@@ -127,9 +141,21 @@ class World:
         self.publish_truth(t)
         self.absorb_measurements()
 
+    def save_maps(self, folder: Path) -> None:
+        """``fire_maps.npz`` in the run folder (only for a scenario with a grid)."""
+        if self.grid_oracle is not None:
+            if self.fire is None:
+                return self.grid_oracle.save_maps(Path(folder) / "fire_maps.npz")
+            extent = grid_extent(self.fire.origin, self.fire.shape, self.fire.config.cell)
+            self.grid_oracle.save_maps(Path(folder) / "fire_maps.npz", self.fire.state_at(self.now), extent)
+
     def summary(self) -> dict:
-        return {"targets": self.oracle.evaluator.summary(), "late_measurements": self.oracle.late,
-                "rejected": self.oracle.rejected}
+        out = {"targets": self.oracle.evaluator.summary(), "late_measurements": self.oracle.late,
+               "rejected": self.oracle.rejected}
+        if self.grid_oracle is not None:
+            regions = [] if self.fire is None else self.fire.fire_regions(self.now)
+            out["grid"] = {**self.grid_oracle.summary(regions, list(self.scenario.decoys)), "fire_regions": regions}
+        return out
 
 
 def main(argv=None) -> int:
@@ -169,6 +195,7 @@ def main(argv=None) -> int:
     finally:
         transport.close()
     write_json(Path(args.out) / "oracle.json", {**world.summary(), "wall_s": time.time() - started, **stats.as_dict()})
+    world.save_maps(Path(args.out))
     return 0
 
 

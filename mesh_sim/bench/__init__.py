@@ -79,5 +79,22 @@ BENCHMARKS: dict[str, Benchmark] = {
             "mesh_sim.bench.stress",
             "live runs under topology churn with a per-link bandwidth cap swept downward: where tracking breaks",
         ),
+        Benchmark(
+            "grid-ops",
+            "mesh_sim.bench.grid_ops",
+            "cells per second for grid update, fuse and delta-encode on 256x256 and 1024x1024 grids vs a plain-numpy "
+            "bound",
+        ),
+        Benchmark(
+            "fire",
+            "mesh_sim.bench.fire",
+            "fire scenario, lockstep Monte Carlo: alarm detection, false-alarm rejection, localisation error, grid "
+            "bytes/s with and without delta encoding",
+        ),
+        Benchmark(
+            "particles",
+            "mesh_sim.bench.particles",
+            "particle fusion (Merino Alg. 5.2 GMM and Alg. 5.3 LOP) time and accuracy vs particle count 200/500/2000",
+        ),
     ]
 }

@@ -1,0 +1,96 @@
+"""The centralized fire map, and how far each agent's map is from it.
+
+The centralized grid receives every agent's per-frame cell evidence without loss
+(``sim/grid_evidence/<agent>``) and applies it as one node would (Merino (4.4): the sum of every
+agent's log-likelihood ratios; for Beta grids the sum of the pseudo-counts): it is the reference that
+decentralized grid fusion is judged against, as the tracking oracle is for targets. It also listens to
+the agents' own grid messages (decoding their deltas like any receiver) to follow each agent's map, and
+records ``KL(centralized || agent)`` (Merino (4.25), summed over cells) every ``EVAL_PERIOD`` seconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent import wire
+from agent.fire_mapping import GridBeliefs, grid_geometry
+from agent.grid_config import GridConfig
+from agent.grid_exchange import GridReceiver
+from mesh_sim.fire_scoring import roc
+
+__all__ = ["GridOracle", "EVAL_PERIOD", "grid_extent"]
+
+EVAL_PERIOD = 2.0  # s between KL samples (chosen here)
+
+
+class GridOracle:
+    def __init__(self, config: GridConfig, area: tuple[float, float, float, float], terrain):
+        self.config = config
+        self.geometry = grid_geometry(area, config.cell, terrain)
+        self.beliefs = GridBeliefs(config.belief, self.geometry)
+        self.central = self.beliefs.uniform()
+        self.receiver = GridReceiver(self.geometry.shape, self.beliefs.layers)
+        self.agents: dict[str, object] = {}  # agent -> its latest grid as broadcast
+        self.kl: dict[str, list[tuple[float, float]]] = {}  # agent -> [(t, KL)]
+        self.rejected = 0
+        self._next_eval = 0.0
+
+    def add_evidence(self, env: wire.Envelope) -> None:
+        p = env.payload
+        try:
+            index = np.asarray(p["index"], np.int64)
+            if self.config.belief == "logodds":
+                self.central = self.central.update_cells(index, np.asarray(p["llr"], float))
+            else:
+                self.central = self.central.update_cells(index, np.asarray(p["m"], float), np.asarray(p["n"], float))
+        except (KeyError, TypeError, ValueError, IndexError):
+            self.rejected += 1
+
+    def add_grid(self, env: wire.Envelope) -> None:
+        try:
+            layers = self.receiver.decode(env.origin, env.seq, env.payload.get("grid"))
+            self.agents[env.origin] = self.beliefs.from_layers(layers)
+        except (wire.DecodeError, ValueError, AttributeError):
+            self.rejected += 1
+
+    def evaluate(self, t: float) -> None:
+        if t + 1e-9 < self._next_eval:
+            return
+        self._next_eval = t + EVAL_PERIOD
+        for agent, grid in self.agents.items():
+            self.kl.setdefault(agent, []).append((t, self.central.kl_divergence(grid)))
+
+    def save_maps(self, path, truth: np.ndarray | None = None, truth_extent=None) -> None:
+        """The final maps as ``fire_maps.npz``: ``central`` and ``agent_<id>`` cell probabilities with their
+        ``extent`` (north min/max, east min/max), and the ``truth`` state (0 unburnt, 1 burning, 2 burnt)
+        with ``truth_extent``, for plots and users."""
+        arrays = {"central": self.central.probability(), "extent": np.array(grid_extent(self.geometry.origin,
+                                                                                   self.geometry.shape,
+                                                                                   self.geometry.cell))}
+        arrays.update({f"agent_{agent}": grid.probability() for agent, grid in self.agents.items()})
+        if truth is not None:
+            arrays["truth"], arrays["truth_extent"] = truth, np.array(truth_extent)
+        np.savez_compressed(path, **arrays)
+
+    def summary(self, regions: list[dict], decoys: list) -> dict:
+        """KL series per agent, and the alarm scores (ROC) of the centralized map and of each agent's."""
+        def scores(grid) -> list[dict]:
+            return roc(grid.probability(), self.geometry, regions, decoys)
+
+        return {
+            "belief": self.config.belief,
+            "cells": self.geometry.size,
+            "rejected": self.rejected,
+            "central": {"roc": scores(self.central)},
+            "agents": {
+                agent: {"kl_series": self.kl.get(agent, []),
+                        "kl_final": self.kl[agent][-1][1] if self.kl.get(agent) else None,
+                        "roc": scores(grid)}
+                for agent, grid in sorted(self.agents.items())
+            },
+        }
+
+
+def grid_extent(origin, shape, cell) -> tuple[float, float, float, float]:
+    """(north min, north max, east min, east max) of a grid."""
+    return origin[0], origin[0] + shape[0] * cell, origin[1], origin[1] + shape[1] * cell
