@@ -42,16 +42,12 @@ from fusion.grid_geometry import GridGeometry, GridGeometryError, real_number
 DEFAULT_CLAMP = 0.999
 #: Tolerance below zero that Beta ``remove`` rounds to zero rather than rejecting (chosen here).
 REMOVE_TOLERANCE = 1e-9
+
+
 # -- shared checks -----------------------------------------------------------------------------------
 def _field(value, name: str, shape: tuple[int, int]) -> np.ndarray:
     """A finite float64 array of ``shape``, copied and made read-only."""
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be numeric, got {type(value).__name__}") from None
-    if arr.shape != shape:
-        raise ValueError(f"{name} must have shape {shape} (the grid's), got {arr.shape}")
-    return _frozen(arr, name)
+    return _frozen(np.array(_operand(value, name, shape)), name)
 
 
 def _frozen(arr: np.ndarray, name: str) -> np.ndarray:

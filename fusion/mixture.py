@@ -179,11 +179,7 @@ class GaussianMixture:
     # -- densities ------------------------------------------------------------------------------
     def logpdf(self, x) -> np.ndarray:
         """``log Σ_k α_k N(x; μ_k, Σ_k)`` for points ``x`` (M, d) -> (M,)."""
-        pts = np.asarray(x, dtype=float)
-        if pts.ndim != 2 or pts.shape[1] != self.dim:
-            raise ValueError(f"points must have shape (M, {self.dim}), got {pts.shape}")
-        if not np.all(np.isfinite(pts)):
-            raise ValueError("points contain non-finite values (NaN or inf)")
+        pts = as_points(x, self.dim)
         out = np.empty(pts.shape[0])
         if self._shared:
             centre = self.mean()
@@ -299,3 +295,13 @@ def _weighted_kmeans(x: np.ndarray, w: np.ndarray, k: int, rng: np.random.Genera
         nonempty = counts > 0
         centres[nonempty] = sums[nonempty] / counts[nonempty, None]
     return labels
+
+
+def as_points(x, dim: int) -> np.ndarray:
+    """Finite points ``(M, dim)`` at which a density is evaluated; ``ValueError`` otherwise."""
+    pts = np.asarray(x, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != dim:
+        raise ValueError(f"points must have shape (M, {dim}), got {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("points contain non-finite values (NaN or inf)")
+    return pts

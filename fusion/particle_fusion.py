@@ -44,7 +44,7 @@ from typing import Protocol
 
 import numpy as np
 
-from fusion.mixture import GaussianMixture
+from fusion.mixture import GaussianMixture, as_points
 from fusion.particles import ParticleSet
 
 #: Default weight of the local belief in the linear opinion pool (chosen here; Merino gives no value).
@@ -87,11 +87,7 @@ class UniformBox:
 
     def logpdf(self, x) -> np.ndarray:
         """``-log(volume)`` inside the box (boundary included), ``-inf`` outside."""
-        pts = np.asarray(x, dtype=float)
-        if pts.ndim != 2 or pts.shape[1] != self.dim:
-            raise ValueError(f"points must have shape (M, {self.dim}), got {pts.shape}")
-        if not np.all(np.isfinite(pts)):
-            raise ValueError("points contain non-finite values (NaN or inf)")
+        pts = as_points(x, self.dim)
         inside = np.all((pts >= self.lower) & (pts <= self.upper), axis=1)
         return np.where(inside, -float(np.sum(np.log(self.upper - self.lower))), -np.inf)
 

@@ -157,6 +157,13 @@ def fmt_us(value: float | None) -> str:
     return f"{value:.3g}" if value < 100 else f"{value:.0f}"
 
 
+def fmt_ms(value: float | None) -> str:
+    """Milliseconds: three decimals below 1, two below 100, none above ('—' for missing)."""
+    if value is None or not math.isfinite(value):
+        return "—"
+    return f"{value:.3f}" if value < 1 else f"{value:.2f}" if value < 100 else f"{value:.0f}"
+
+
 def fmt_ratio(value: float | None) -> str:
     if value is None or not math.isfinite(value):
         return "—"
@@ -205,6 +212,13 @@ def environment(packages: Iterable[str] = ("numpy", "scipy")) -> dict:
         "cpu_count": os.cpu_count(),
         "packages": versions,
     }
+
+
+def machine_line(env: dict, packages: dict[str, str]) -> str:
+    """``"<cpu> (<n> CPUs), Python x.y, numpy a.b, ..."`` for a report header; ``packages`` maps a label to
+    its distribution name in ``env["packages"]``."""
+    versions = ", ".join(f"{label} {env['packages'].get(name)}" for label, name in packages.items())
+    return f"{env['processor']} ({env['cpu_count']} CPUs), Python {env['python']}, {versions}"
 
 
 def _cpu_model() -> str:

@@ -39,6 +39,7 @@ NAME = "fusion-ops"
 SIZES = (4, 6)
 SINGLE_OP_GOAL = 1.5  # skymesh / bare numpy, at most (from the issue)
 BATCH_GOAL = 20.0  # Stone Soup per-track time / GaussianBatch per-track time, at least (from the issue)
+LIBRARIES = {"numpy": "numpy", "scipy": "scipy", "filterpy": "filterpy", "Stone Soup": "stonesoup"}  # report header
 OTHER_LIBRARIES = ("filterpy", "stonesoup", "stonesoup-info")
 AGREEMENT_WARN = 1e-5  # relative difference above which a cell is flagged (Stone Soup's finite-difference
 # Jacobians of the bearing models put it at ~1e-7..1e-6; everything else agrees to ~1e-14)
@@ -206,12 +207,9 @@ def report(result: dict, console=None) -> None:
     """Print the tables and the goal verdicts of a :func:`run` result."""
     console = console or common.make_console()
     env, settings = result["environment"], result["settings"]
-    pk = env["packages"]
     console.print(
         f"[bold]{NAME}[/bold]  {'quick' if settings['quick'] else 'full'} run, {settings['repeats']} repeats; "
-        f"median µs per call.  {env['processor']} ({env['cpu_count']} CPUs), Python {env['python']}, "
-        f"numpy {pk.get('numpy')}, scipy {pk.get('scipy')}, filterpy {pk.get('filterpy')}, "
-        f"Stone Soup {pk.get('stonesoup')}",
+        f"median µs per call.  {common.machine_line(env, LIBRARIES)}",
         highlight=False,
     )
     rows = {(r["op"], r["n"], r["impl"]): r for r in result["rows"]}

@@ -275,11 +275,9 @@ def report(result: dict, console=None) -> None:
     """Print the tables and the goal verdicts of a :func:`run` result."""
     console = console or common.make_console()
     s, env = result["settings"], result["environment"]
-    pk = env["packages"]
     console.print(
         f"[bold]{NAME}[/bold]  {'quick' if s['quick'] else 'full'} run, {s['repeats']} repeats; median per call. "
-        f"{env['processor']} ({env['cpu_count']} CPUs), Python {env['python']}, numpy {pk.get('numpy')}, "
-        f"msgpack {pk.get('msgpack')}",
+        f"{common.machine_line(env, {'numpy': 'numpy', 'msgpack': 'msgpack'})}",
         highlight=False,
     )
     table = []

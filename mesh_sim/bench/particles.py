@@ -265,18 +265,13 @@ def _goals(rows: list[dict], accuracy: list[dict], messages: list[dict]) -> dict
 
 
 # -- report ---------------------------------------------------------------------------------------------
-def _ms(value: float) -> str:
-    return f"{value:.3f}" if value < 1 else f"{value:.2f}" if value < 100 else f"{value:.0f}"
-
-
 def report(result: dict, console=None) -> None:
     """Print the tables and goal verdicts of a :func:`run` result."""
     console = console or common.make_console()
     s, env = result["settings"], result["environment"]
     console.print(
         f"[bold]{NAME}[/bold]  {'quick' if s['quick'] else 'full'} run, {s['repeats']} repeats, {s['seeds']} seeds; "
-        f"{s['dim']}-D state. {env['processor']} ({env['cpu_count']} CPUs), Python {env['python']}, "
-        f"numpy {env['packages'].get('numpy')}, scipy {env['packages'].get('scipy')}",
+        f"{s['dim']}-D state. {common.machine_line(env, {'numpy': 'numpy', 'scipy': 'scipy'})}",
         highlight=False,
     )
     by = {(r["n"], r["op"]): r for r in result["rows"]}
@@ -285,7 +280,7 @@ def report(result: dict, console=None) -> None:
         cells = [label]
         for n in s["sizes"]:
             r = by[(n, key)]
-            cells += [_ms(r["ms"]), "—" if baseline is None else common.fmt_ratio(r["ratio_to_baseline"])]
+            cells += [common.fmt_ms(r["ms"]), "—" if baseline is None else common.fmt_ratio(r["ratio_to_baseline"])]
         if key == "bayes":
             cells.append(", ".join(f"N={n}: {sign}{sec:g} s" for n, (sec, sign) in THESIS_FUSION_S.items()))
         elif key == "lop":

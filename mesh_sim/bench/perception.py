@@ -252,20 +252,13 @@ def _steps(rows: list[dict], sizes) -> list[dict]:
 # ==================================================================================================
 # report
 # ==================================================================================================
-def _ms(value: float | None) -> str:
-    if value is None or not math.isfinite(value):
-        return "—"
-    return f"{value:.3f}" if value < 1 else f"{value:.2f}" if value < 100 else f"{value:.0f}"
-
-
 def report(result: dict, console=None) -> None:
     """Print the tables of a :func:`run` result."""
     console = console or common.make_console()
     s, env = result["settings"], result["environment"]
     console.print(
         f"[bold]{NAME}[/bold]  {'quick' if s['quick'] else 'full'} run, {s['repeats']} repeats; median ms per call. "
-        f"{env['processor']} ({env['cpu_count']} CPUs), Python {env['python']}, numpy {env['packages'].get('numpy')}, "
-        f"OpenCV {env['packages'].get('opencv-python-headless')}",
+        f"{common.machine_line(env, {'numpy': 'numpy', 'OpenCV': 'opencv-python-headless'})}",
         highlight=False,
     )
     sizes = s["sizes"]
@@ -276,11 +269,11 @@ def report(result: dict, console=None) -> None:
         cells = [op.group, op.label + (" *" if op.in_step else "")]
         for size in sizes:
             r = by.get((size, 1, op.key))
-            cells.append("—" if r is None else _ms(r["ms"]))
+            cells.append("—" if r is None else common.fmt_ms(r["ms"]))
             cells.append("—" if r is None else common.fmt_ratio(r["ratio_to_baseline"]))
             if multi:
                 m = by.get((size, multi[0], op.key))
-                cells.append("—" if m is None else _ms(m["ms"]))
+                cells.append("—" if m is None else common.fmt_ms(m["ms"]))
         rows.append(cells)
     columns = [("group", "left"), ("operation", "left")]
     for size in sizes:
@@ -297,7 +290,7 @@ def report(result: dict, console=None) -> None:
     step_rows = []
     for st in result["steps"]:
         step_rows.append([
-            st["size"], _ms(st["render_ms"]), _ms(st["perception_ms"]), _ms(st["step_ms"]),
+            st["size"], *(common.fmt_ms(st[key]) for key in ("render_ms", "perception_ms", "step_ms")),
             common.fmt_ratio(st["step_ratio_to_baseline"]), f"{st['budget_ms']:.0f}",
             f"[bold]{st['agents_per_core']}[/bold] ({st['agents_per_core_exact']:.1f})",
             st["perception_agents_per_core"],
