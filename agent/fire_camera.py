@@ -22,7 +22,7 @@ from perception.pose import CameraPose, Gimbal
 from perception.render import render_frame
 from perception.scene import Fire
 
-DECOY_SIZE_M = 3.0  # a hot rock or a sun glint (chosen here)
+DECOY_SIZE_M = 5.0  # a hot spot the size of a cell: a hot vehicle, a sun glint on a roof (chosen here)
 
 
 @dataclass(frozen=True)

@@ -161,6 +161,7 @@ class FireMapper:
             "grid_keyframes": int(self.keyframes),
             "grid_bytes": int(sizes.sum()),
             "grid_message_bytes_mean": float(sizes.mean()) if sizes.size else None,
+            "grid_message_bytes_max": int(sizes.max()) if sizes.size else None,
             "grid_fusions": dict(self.fusions),
             "alarms": [{"mean": a.mean.tolist(), "cov": a.cov.tolist(), "probability": a.probability,
                         "cells": a.cells} for a in self.alarms],
