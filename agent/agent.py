@@ -120,7 +120,8 @@ class Agent:
         estimates = self.tracker.estimates()
         if isinstance(self.planner, EntropyPlanner):
             beta = self.mapper.grid.shape_parameters() if self.mapper.config.belief == "beta" else None
-            goal = self.planner.plan(state.position, self.mapper.probability(), self.mapper.geometry.centres(), beta)
+            goal = self.planner.plan(state.position, self.mapper.planning_probability(), self.mapper.geometry.centres(),
+                                     beta)
         else:
             goal = self.planner.plan(state.position, [(tid, est.mean[:2]) for tid, est in estimates])
         self.vehicle.set_setpoint(goal_to_setpoint(goal))

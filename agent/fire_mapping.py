@@ -30,6 +30,7 @@ from agent.grid_codec import encoded_size
 from agent.grid_config import GridConfig
 from agent.grid_exchange import GridReceiver, GridSender
 from fusion.channel_filter import ChannelFilter
+from fusion.fire_spread import FireSpreadModel
 from fusion.grid import BetaGrid, LogOddsGrid
 from fusion.grid_alarms import Alarm, extract_alarms
 from fusion.grid_geometry import GridGeometry
@@ -97,6 +98,20 @@ class FireMapper:
 
     def probability(self) -> np.ndarray:
         return self.grid.probability()
+
+    def planning_probability(self) -> np.ndarray:
+        """The map the explorer plans on: with ``plan_spread`` the known fire — cells above the alarm
+        threshold — is predicted to spread ``plan_steps`` steps (Merino (6.5)-(6.6), noisy-OR), and each
+        cell takes the larger of its probability and that prediction, so the cells around known fires
+        regain entropy and get revisited as the front moves. Unexplored cells (p = 0.5) are not treated as
+        burning: the thesis's prediction assumes a small fire prior, not the grid's 0.5. Only the plan sees
+        the prediction; the shared map stays static, which keeps channel filters exact."""
+        p = self.probability()
+        if self.config.plan_spread == 0.0:
+            return p
+        known = np.where(p > self.config.alarm_threshold, p, 0.0)
+        model = FireSpreadModel(burn=0.0, spread=self.config.plan_spread)
+        return np.maximum(p, model.predict(known, np.zeros_like(p), self.config.plan_steps)[0])
 
     def update_alarms(self, t: float) -> list[Alarm]:
         if t + 1e-9 >= self._next_alarms:

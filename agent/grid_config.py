@@ -26,6 +26,8 @@ class GridConfig:
     keyframe_every: int = 10  # messages between forced keyframes (chosen here)
     alarm_threshold: float = 0.8  # cell probability above which cells form alarms (Merino's example value)
     alarm_period: float = 5.0  # s between alarm extractions, T of Merino §4.2.2 (chosen here)
+    plan_spread: float = 0.0  # planning only: omega of (6.6) per planning step (0: plan on the map as it is)
+    plan_steps: int = 4  # planning only: fire-spread steps predicted before the entropy is computed (chosen here)
     detection: DetectionModel = field(default_factory=DetectionModel)
     pose_noise: PoseNoise = field(default_factory=PoseNoise)
     camera: FireCameraConfig = field(default_factory=FireCameraConfig)
@@ -42,6 +44,10 @@ class GridConfig:
                 raise ValueError(f"grid.{name} must be a positive number, got {value!r}")
         if not 0.0 < self.alarm_threshold < 1.0:
             raise ValueError(f"grid.alarm_threshold must be in (0, 1), got {self.alarm_threshold!r}")
+        if not 0.0 <= self.plan_spread <= 1.0:
+            raise ValueError(f"grid.plan_spread must be a probability, got {self.plan_spread!r}")
+        if isinstance(self.plan_steps, bool) or not isinstance(self.plan_steps, int) or self.plan_steps < 1:
+            raise ValueError(f"grid.plan_steps must be a positive integer, got {self.plan_steps!r}")
         if isinstance(self.keyframe_every, bool) or not isinstance(self.keyframe_every, int) or self.keyframe_every < 1:
             raise ValueError(f"grid.keyframe_every must be a positive integer, got {self.keyframe_every!r}")
 

@@ -125,8 +125,26 @@ def test_negative_beta_counts_on_the_wire_are_rejected():
     assert err.value.reason == "grid_bad_values"
 
 
+def test_the_explorer_plans_on_a_predicted_spread_but_the_shared_map_stays_static():
+    """An explored map (p = 0.01) with one fire cell and one unexplored cell (p = 0.5)."""
+    node = Node("a", GridConfig(cell=10.0, plan_spread=0.2, plan_steps=3))
+    shape = node.mapper.geometry.shape
+    llr = np.full(shape, np.log(0.01 / 0.99))
+    llr[5, 5], llr[1, 1] = 8.0, 0.0  # the fire, and a cell nobody has seen
+    node.mapper.grid = node.mapper.grid.update(llr)
+    before = node.mapper.grid.evidence.copy()
+    planned, shared = node.mapper.planning_probability(), node.mapper.probability()
+    assert planned[5, 6] > shared[5, 6] + 0.3  # a neighbour of the fire may be burning by now
+    assert planned[5, 1] == pytest.approx(shared[5, 1], abs=1e-12)  # far from the fire: no change
+    assert planned[1, 1] == pytest.approx(0.5) and planned[1, 2] == pytest.approx(0.01)  # unexplored is no fire
+    np.testing.assert_array_equal(node.mapper.grid.evidence, before)
+    off = Node("b", GridConfig(cell=10.0))
+    np.testing.assert_array_equal(off.mapper.planning_probability(), off.mapper.probability())
+
+
 @pytest.mark.parametrize("bad", [{"belief": "gaussian"}, {"policy": "bogus"}, {"cell": -1.0}, {"alarm_threshold": 1.5},
-                                 {"keyframe_every": 0}, {"intersect": "min"}, {"colour": "red"}, {"pd": 0.01}])
+                                 {"keyframe_every": 0}, {"intersect": "min"}, {"colour": "red"}, {"pd": 0.01},
+                                 {"plan_spread": 1.5}, {"plan_steps": 0}])
 def test_bad_grid_settings_are_clear_errors(bad):
     with pytest.raises(ValueError):
         GridConfig.from_dict(bad)
