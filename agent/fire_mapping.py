@@ -28,7 +28,7 @@ from agent import wire
 from agent.fire_camera import FireCamera
 from agent.grid_codec import encoded_size
 from agent.grid_config import GridConfig
-from agent.grid_exchange import GridReceiver, GridSender
+from agent.grid_exchange import HISTORY, GridReceiver, GridSender
 from fusion.channel_filter import ChannelFilter
 from fusion.fire_spread import FireSpreadModel
 from fusion.grid import BetaGrid, LogOddsGrid
@@ -66,6 +66,8 @@ class GridBeliefs:
 
 
 class FireMapper:
+    """One agent's fire map: local evidence, exchange with neighbours through channel filters, alarms."""
+
     def __init__(self, agent_id: str, config: GridConfig, area: tuple[float, float, float, float], terrain,
                  seed: int):
         self.id = agent_id
@@ -74,7 +76,9 @@ class FireMapper:
         self.geometry = grid_geometry(area, config.cell, terrain)
         self.beliefs = GridBeliefs(config.belief, self.geometry)
         self.grid = self.beliefs.uniform()
-        self.channels = ChannelFilter(self.beliefs.uniform(), config.policy, INTERSECT_RULES[config.intersect])
+        # the channel filters remember as many sent grids as the exchange does: a whole grid per message
+        self.channels = ChannelFilter(self.beliefs.uniform(), config.policy, INTERSECT_RULES[config.intersect],
+                                      history=HISTORY)
         self.sender = GridSender(config.keyframe_every, config.delta)
         self.receiver = GridReceiver(self.geometry.shape, self.beliefs.layers)
         self.camera = FireCamera(config.camera, config.detection, config.pose_noise, seed)
