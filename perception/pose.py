@@ -112,6 +112,20 @@ class Gimbal:
         return rot_z(self.pan) @ rot_y(self.tilt) @ FRD_FROM_CAMERA
 
 
+def _store_rigid(obj, rotation: tuple[str, str], vector: tuple[str, str, str]) -> None:
+    """Check and store, as read-only copies, a frozen dataclass's rotation field ``(field, name)`` and
+    3-vector field ``(field, name, frame and unit)``."""
+    (r_field, r_name), (v_field, v_name, unit) = rotation, vector
+    R = as_rotation(getattr(obj, r_field), r_name).copy()
+    v = np.array(getattr(obj, v_field), dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{v_name} must be a finite 3-vector ({unit}), got {getattr(obj, v_field)!r}")
+    R.setflags(write=False)
+    v.setflags(write=False)
+    object.__setattr__(obj, r_field, R)
+    object.__setattr__(obj, v_field, v)
+
+
 @dataclass(frozen=True)
 class CameraMount:
     """Where the gimbal base sits on the airframe: ``R_body_from_base`` (3x3 rotation, default the
@@ -122,14 +136,8 @@ class CameraMount:
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self):
-        R = as_rotation(self.R_body_from_base, "camera mount R_body_from_base").copy()
-        t = np.array(self.offset, dtype=float)
-        if t.shape != (3,) or not np.all(np.isfinite(t)):
-            raise ValueError(f"camera mount offset must be a finite 3-vector (body FRD, m), got {self.offset!r}")
-        R.setflags(write=False)
-        t.setflags(write=False)
-        object.__setattr__(self, "R_body_from_base", R)
-        object.__setattr__(self, "offset", t)
+        _store_rigid(self, ("R_body_from_base", "camera mount R_body_from_base"),
+                     ("offset", "camera mount offset", "body FRD, m"))
 
 
 def camera_rotation(roll, pitch, yaw, gimbal: Gimbal | None = None, mount: CameraMount | None = None) -> np.ndarray:
@@ -149,14 +157,7 @@ class CameraPose:
     centre: np.ndarray
 
     def __post_init__(self):
-        R = as_rotation(self.R_world_from_cam, "camera pose rotation").copy()
-        c = np.array(self.centre, dtype=float)
-        if c.shape != (3,) or not np.all(np.isfinite(c)):
-            raise ValueError(f"camera centre must be a finite 3-vector (NED, m), got {self.centre!r}")
-        R.setflags(write=False)
-        c.setflags(write=False)
-        object.__setattr__(self, "R_world_from_cam", R)
-        object.__setattr__(self, "centre", c)
+        _store_rigid(self, ("R_world_from_cam", "camera pose rotation"), ("centre", "camera centre", "NED, m"))
 
     @classmethod
     def from_vehicle(

@@ -157,6 +157,13 @@ def fmt_us(value: float | None) -> str:
     return f"{value:.3g}" if value < 100 else f"{value:.0f}"
 
 
+def fmt(value, spec: str, suffix: str = "") -> str:
+    """``format(value, spec)`` plus ``suffix``; '—' for a missing or non-finite value."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "—"
+    return f"{format(value, spec)}{suffix}"
+
+
 def fmt_ms(value: float | None) -> str:
     """Milliseconds: three decimals below 1, two below 100, none above ('—' for missing)."""
     if value is None or not math.isfinite(value):

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from mesh_sim.bench import common
+from mesh_sim.bench.common import fmt
 
 NAME = "fire"
 CONFIGS = {
@@ -126,10 +127,6 @@ def _goals(rows: list[dict]) -> list[dict]:
     return goals
 
 
-def _f(value, spec: str) -> str:
-    return "—" if value is None else format(value, spec)
-
-
 def report(result: dict, console=None) -> None:
     console = console or common.make_console()
     s = result["settings"]
@@ -137,14 +134,14 @@ def report(result: dict, console=None) -> None:
         console, f"fire scenario — {s['seeds']} seed(s) x {s['duration']:g} s, lockstep",
         ["config", "runs", "detection", "decoys rejected", "other false/agent", "loc. error [m]", "KL to central",
          "grid bytes/agent/s"],
-        [(r["config"], r["runs"], _f(r["detection_rate"], ".0%"), _f(r["false_alarm_rejection"], ".0%"),
-          _f(r["other_false_alarms"], ".2f"), _f(r["localisation_error_m"], ".2f"), _f(r["kl_to_central"], ".1f"),
-          _f(r["grid_bytes_per_agent_per_s"], ",.0f")) for r in result["rows"]],
+        [(r["config"], r["runs"], fmt(r["detection_rate"], ".0%"), fmt(r["false_alarm_rejection"], ".0%"),
+          fmt(r["other_false_alarms"], ".2f"), fmt(r["localisation_error_m"], ".2f"), fmt(r["kl_to_central"], ".1f"),
+          fmt(r["grid_bytes_per_agent_per_s"], ",.0f")) for r in result["rows"]],
         caption=MERINO,
     )
     for config, curve in result["roc"].items():
         common.print_table(console, f"operating curve — {config}", ["threshold", "detection", "false alarms/agent"],
-                           [(f"{r['threshold']:g}", _f(r["detection_rate"], ".0%"),
-                             _f(r["false_alarms_per_agent"], ".2f")) for r in curve])
+                           [(f"{r['threshold']:g}", fmt(r["detection_rate"], ".0%"),
+                             fmt(r["false_alarms_per_agent"], ".2f")) for r in curve])
     common.print_table(console, "goals", ["goal", "value", "verdict"],
-                       [(g["goal"], _f(g["value"], ".3g"), common.verdict(g["ok"])) for g in result["goals"]])
+                       [(g["goal"], fmt(g["value"], ".3g"), common.verdict(g["ok"])) for g in result["goals"]])

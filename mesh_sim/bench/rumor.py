@@ -67,6 +67,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from mesh_sim.bench import common
+from mesh_sim.bench.common import fmt
 
 NAME = "rumor"
 _REPO = Path(__file__).resolve().parents[2]
@@ -542,12 +543,6 @@ def _plot(result: dict, plot_dir) -> Path:
     return path
 
 
-def _f(value, spec: str, suffix: str = "") -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "—"
-    return f"{format(value, spec)}{suffix}"
-
-
 def _tracked(r: dict, seeds: int) -> str:
     out = []
     if r["diverged_runs"]:
@@ -579,11 +574,11 @@ def report(result: dict, console=None) -> None:
     for r in result["rows"]:
         goal = common.verdict(r.get("goal_pass")) if r["policy"] == "hybrid" else ""
         table.append([
-            r["topology"], f"{100 * r['loss']:.0f} %", r["policy"], _f(r["rmse"], ".2f"),
-            _f(r["rmse_ratio"], ".2f", "x"),
-            f"{_f(r['anees'], '.2f')}{'' if r['consistent'] else ' [red]>[/red]'}",
+            r["topology"], f"{100 * r['loss']:.0f} %", r["policy"], fmt(r["rmse"], ".2f"),
+            fmt(r["rmse_ratio"], ".2f", "x"),
+            f"{fmt(r['anees'], '.2f')}{'' if r['consistent'] else ' [red]>[/red]'}",
             f"{r['anees_lo']:.2f}-{r['anees_hi']:.2f} ({r['independent_samples']})",
-            _f(r["oracle_anees"], ".2f"), f"{_f(100 * r['exact_share'], '.0f')}/{_f(100 * r['ci_share'], '.0f')}",
+            fmt(r["oracle_anees"], ".2f"), f"{fmt(100 * r['exact_share'], '.0f')}/{fmt(100 * r['ci_share'], '.0f')}",
             f"{r['radio_bytes_per_agent_s']:,.0f}", _drops(r["drops_per_agent_s"]),
             f"{r['mean_hops']:.2f}/{r['max_hops']}", _tracked(r, len(s["seeds"])), goal,
         ])
@@ -636,10 +631,10 @@ def report(result: dict, console=None) -> None:
                      (d["topology"], d["loss"], d["policy"])), None)
         console.print(
             f"Diagnostic, {d['topology']} {100 * d['loss']:.0f} % loss {d['policy']}: every track sent every step "
-            f"(max silence 0.2 s) gives {_f(d['rmse_ratio'], '.2f', 'x')} the oracle's RMSE at "
+            f"(max silence 0.2 s) gives {fmt(d['rmse_ratio'], '.2f', 'x')} the oracle's RMSE at "
             f"{d['radio_bytes_per_agent_s']:,.0f} B/agent/s, against "
-            f"{_f(base['rmse_ratio'] if base else None, '.2f', 'x')} at "
-            f"{_f(base['radio_bytes_per_agent_s'] if base else None, ',.0f')} B/agent/s with the information "
+            f"{fmt(base['rmse_ratio'] if base else None, '.2f', 'x')} at "
+            f"{fmt(base['radio_bytes_per_agent_s'] if base else None, ',.0f')} B/agent/s with the information "
             f"trigger; what remains is the multi-hop delay (mean {d['mean_hops']:.2f} hops, up to "
             f"{d['max_hops']}: the oracle sees every measurement at once, an agent k hops away up to k steps "
             "later).",

@@ -338,8 +338,7 @@ def report(result: dict, console=None) -> None:
         f"{s['duration_s']:g} s at speed {s['speed']:g} (wall = sim time), agents at {s['rate_hz']:g} Hz, "
         f"{s['runs_per_size']} run(s) per size, Rerun off, radio {_radio(s.get('radio'))}, start-up: "
         f"{(s.get('startup') or {}).get('kind', '?')}.  "
-        f"{env['processor']} ({env['cpu_count']} CPUs), "
-        f"Python {env['python']}, zenoh {env['packages'].get('eclipse-zenoh')}.  Load average before/after: "
+        f"{common.machine_line(env, {'zenoh': 'eclipse-zenoh'})}.  Load average before/after: "
         f"{s['load_average_before'][0]:.2f} / {s['load_average_after'][0]:.2f}",
         highlight=False,
     )

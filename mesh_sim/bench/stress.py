@@ -50,6 +50,7 @@ from pathlib import Path
 from rich.console import Console
 
 from mesh_sim.bench import common
+from mesh_sim.bench.common import fmt
 from mesh_sim.bench.rumor import anees_interval, independent_samples
 
 NAME = "stress"
@@ -285,12 +286,6 @@ def _goals(rows: list[dict]) -> dict:
 # ==================================================================================================
 # report
 # ==================================================================================================
-def _f(value, spec: str, suffix: str = "") -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "—"
-    return f"{format(value, spec)}{suffix}"
-
-
 def report(result: dict, console=None) -> None:
     """Print the per-cap table and where it breaks."""
     console = console or common.make_console()
@@ -314,13 +309,13 @@ def report(result: dict, console=None) -> None:
             f"({common.fmt_ratio(r['delivered_ratio'])})",
             "/".join(f"{d[c]:.2g}" for c in ("down", "range", "loss", "rate")),
             f"{r['tracks_thinned']}/{r['telemetry_thinned']}",
-            f"{_f(r['rmse'], '.2f')} ({common.fmt_ratio(r['rmse_ratio_to_baseline'])})",
-            _f(r["rmse_ratio_to_oracle"], ".2f", "x"),
-            f"{_f(r['anees'], '.2f')} {'≤' if r['consistent'] else '[red]>[/red]'} {r['anees_hi']:.2f}",
-            _f(r["oracle_anees"], ".2f"),
-            f"{_f(100 * r['coverage_min'], '.0f')}/{_f(100 * r['coverage_mean'], '.0f')} % "
+            f"{fmt(r['rmse'], '.2f')} ({common.fmt_ratio(r['rmse_ratio_to_baseline'])})",
+            fmt(r["rmse_ratio_to_oracle"], ".2f", "x"),
+            f"{fmt(r['anees'], '.2f')} {'≤' if r['consistent'] else '[red]>[/red]'} {r['anees_hi']:.2f}",
+            fmt(r["oracle_anees"], ".2f"),
+            f"{fmt(100 * r['coverage_min'], '.0f')}/{fmt(100 * r['coverage_mean'], '.0f')} % "
             + ("yes" if r["every_agent_tracks_every_target"] else "[red]no[/red]"),
-            _f(100 * r["missed_steps_share"], ".1f", " %"),
+            fmt(100 * r["missed_steps_share"], ".1f", " %"),
             common.verdict(r["ok"]),
         ])
     common.print_table(

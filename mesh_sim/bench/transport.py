@@ -49,6 +49,7 @@ import tempfile
 import threading
 import time
 import uuid
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -402,24 +403,27 @@ class _Bench:
             pub.put(data)
         return self._burst_result(n, start, time.time())
 
+    def _drained_until_timeout(self, start: float) -> Iterator[list]:
+        """Batches drained from the transport until RTT_TIMEOUT_S after ``start`` (perf_counter); the caller
+        stops iterating once it has its reply."""
+        while time.perf_counter() - start < RTT_TIMEOUT_S:
+            items = self.transport.drain()
+            if items:
+                yield items
+            else:
+                time.sleep(self.poll_sleep)
+
     # -- queue path: ZenohTransport without the wire format ---------------------------------------------
     def _queue_round_trips(self, n: int) -> tuple[list[float], int]:
         self._mode("queue-echo")
         rtts, lost = [], 0
-        transport, key, clock, nap = self.transport, self.keys.queue_ping, time.perf_counter, self.poll_sleep
+        transport, key, clock = self.transport, self.keys.queue_ping, time.perf_counter
         for _ in range(n):
             data = self._next_bare()
             expected = data[:8]
             start = clock()
             transport.publish(key, data)
-            done = False
-            while not done and clock() - start < RTT_TIMEOUT_S:
-                items = transport.drain()
-                if not items:
-                    time.sleep(nap)
-                    continue
-                done = any(item.data[:8] == expected for item in items)
-            if done:
+            if any(item.data[:8] == expected for items in self._drained_until_timeout(start) for item in items):
                 rtts.append(clock() - start)
             else:
                 lost += 1
@@ -443,7 +447,6 @@ class _Bench:
         self._mode("agent-echo")
         rtts, lost = [], 0
         transport, codec, key, clock = self.transport, self.codec, self.keys.queue_ping, time.perf_counter
-        nap = self.poll_sleep
         acked = None
         for _ in range(n):
             self.seq += 1
@@ -453,11 +456,7 @@ class _Bench:
             encode_s = clock() - start
             transport.publish(key, data)
             done = False
-            while not done and clock() - start < RTT_TIMEOUT_S:
-                items = transport.drain()
-                if not items:
-                    time.sleep(nap)
-                    continue
+            for items in self._drained_until_timeout(start):
                 for item in items:
                     decode_start = clock()
                     try:
@@ -468,6 +467,8 @@ class _Bench:
                     if env.acks.get("ping") == seq:
                         done = True
                         self.codec_in_loop_us.append(1e6 * (encode_s + clock() - decode_start))
+                if done:
+                    break
             if done:
                 rtts.append(clock() - start)
             else:
@@ -611,12 +612,11 @@ def report(result: dict, console=None) -> None:
     """Print the tables of a :func:`run` result."""
     console = console or common.make_console()
     s, env = result["settings"], result["environment"]
-    pk = env["packages"]
     console.print(
         f"[bold]{NAME}[/bold]  {'quick' if s['quick'] else 'full'} run: {s['round_trips_per_path']:,} round trips "
         f"and {s['blocks']} bursts of {s['burst']:,} messages per path, interleaved in {s['blocks']} blocks.  "
-        f"{env['processor']} ({env['cpu_count']} CPUs), Python {env['python']}, zenoh {pk.get('eclipse-zenoh')}, "
-        f"msgpack {pk.get('msgpack')}.  Load average before/after: {s['load_average_before'][0]:.2f} / "
+        f"{common.machine_line(env, {'zenoh': 'eclipse-zenoh', 'msgpack': 'msgpack'})}.  Load average "
+        f"before/after: {s['load_average_before'][0]:.2f} / "
         f"{s['load_average_after'][0]:.2f}",
         highlight=False,
     )
