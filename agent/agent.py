@@ -24,7 +24,7 @@ from agent.camera_sensor import sensor_from_config
 from agent.config import AgentScenario
 from agent.evaluation import TrackEvaluator
 from agent.fire_mapping import FireMapper
-from agent.fire_truth import decode_fire
+from agent.fire_truth import decode_fire, decoy
 from agent.netem import LinkEmulator
 from agent.sending import SendScheduler
 from agent.sensing import Bearing
@@ -93,6 +93,7 @@ class Agent:
         self._logged: set[tuple[str, str]] = set()
         self._truth: tuple[float, list[dict]] | None = None
         self._fire: tuple[list, list] = ([], [])  # burning cells and decoys (hot spot, probability), as scene fires
+        self._fire_payload = None  # the (fire, decoys) truth self._fire was decoded from
         self.last_bearings: list[Bearing] = []
 
     # -- the loop -------------------------------------------------------------------------------
@@ -240,10 +241,12 @@ class Agent:
         targets = env.payload.get("targets")
         if isinstance(targets, list):
             self._truth = (env.stamp, targets)
-        if self.mapper is not None and "fire" in env.payload:
-            try:
-                fire = decode_fire(env.payload["fire"], self.terrain)
-                self._fire = (fire.scene_fires(self.terrain), _decoys(env.payload.get("decoys", [])))
+        fire_truth = (env.payload.get("fire"), env.payload.get("decoys", []))
+        if self.mapper is not None and fire_truth[0] is not None and fire_truth != self._fire_payload:
+            try:  # the fire changes once per world step, the truth arrives at every agent step
+                fire = decode_fire(fire_truth[0], self.terrain)
+                self._fire = (fire.scene_fires(self.terrain), _decoys(fire_truth[1]))
+                self._fire_payload = fire_truth
             except wire.DecodeError as err:
                 self._reject("world", err.reason)
         uavs = env.payload.get("uavs")
@@ -391,12 +394,8 @@ def _planner(scenario: AgentScenario, index: int, seed: int, mapper):
 def _decoys(entries) -> list[tuple[float, float, float]]:
     """``[[north, east, probability], ...]`` from the truth: hot spots that show in a frame with that
     probability (malformed entries are ignored: advisory simulation data)."""
-    out = []
-    for entry in entries if isinstance(entries, list) else []:
-        if isinstance(entry, list | tuple) and len(entry) == 3 and all(
-                isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in entry):
-            out.append((float(entry[0]), float(entry[1]), float(entry[2])))
-    return out
+    parsed = [decoy(entry) for entry in (entries if isinstance(entries, list) else [])]
+    return [d for d in parsed if d is not None]
 
 
 def _by_peer(counter: Counter) -> dict:

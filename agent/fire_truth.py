@@ -212,3 +212,13 @@ def decode_fire(payload: Mapping, terrain=None) -> FireTruth:
         return FireTruth((n0, e0), cell, state, temperature, terrain)
     except ValueError as err:
         raise _bad(str(err)) from None
+
+
+def decoy(entry) -> tuple[float, float, float] | None:
+    """One decoy ``[north, east, probability of showing in a frame]`` — finite numbers, the probability in
+    [0, 1] — as floats, or ``None`` if the entry is not one."""
+    ok = isinstance(entry, list | tuple) and len(entry) == 3 and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in entry)
+    if not ok or not 0.0 <= entry[2] <= 1.0:
+        return None
+    return float(entry[0]), float(entry[1]), float(entry[2])

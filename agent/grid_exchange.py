@@ -101,6 +101,3 @@ class GridReceiver:
             if latest is not None:
                 out[origin] = latest[0]
         return out
-
-    def forget(self, origin: str) -> None:
-        self._origins.pop(origin, None)

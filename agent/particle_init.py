@@ -91,6 +91,7 @@ class ParticleInitiator:
     def __init__(self, config: ParticleInitConfig, seed: int):
         self.config = config
         self.rng = np.random.default_rng(seed)
+        self._display_rng = np.random.default_rng(seed + 1)  # the telemetry's draws never shift the filter's
         self.candidates: list[Candidate] = []
         self.started = 0
         self.handed_over = 0
@@ -140,7 +141,7 @@ class ParticleInitiator:
 
     def points(self) -> np.ndarray:
         """Up to ``TELEMETRY_POINTS`` particles of every candidate, (k, 3), for the ground station."""
-        chunks = [c.particles.resampled(self.rng, TELEMETRY_POINTS).states for c in self.candidates]
+        chunks = [c.particles.resampled(self._display_rng, TELEMETRY_POINTS).states for c in self.candidates]
         return np.concatenate(chunks).astype(np.float32) if chunks else np.zeros((0, 3), np.float32)
 
     def metrics(self) -> dict:

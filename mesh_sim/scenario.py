@@ -6,11 +6,11 @@ by their stem (``skymesh run --scenario default``); any other path is read as a 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 from agent.config import AgentScenario, read_scenario_file
+from agent.fire_truth import decoy
 from mesh_sim.fire import FireConfig
 from mesh_sim.radio import compile_plan
 from mesh_sim.targets import targets_from_config
@@ -93,10 +93,9 @@ def parse_decoys(entries) -> tuple[tuple[float, float, float], ...]:
         raise ValueError(f"decoys must be a list of [north, east, probability], got {entries!r}")
     out = []
     for k, entry in enumerate(entries):
-        ok = isinstance(entry, list) and len(entry) == 3 and all(
-            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in entry)
-        if not ok or not 0.0 <= entry[2] <= 1.0:
+        parsed = decoy(entry)
+        if parsed is None:
             raise ValueError(f"decoys[{k}] must be [north, east, probability in 0..1], got {entry!r}")
-        out.append((float(entry[0]), float(entry[1]), float(entry[2])))
+        out.append(parsed)
     return tuple(out)
 

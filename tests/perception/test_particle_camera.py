@@ -41,14 +41,19 @@ def detection(pose, intrinsics=K, position_sigma=0.5, attitude_deg=1.0, pixel_si
     return CameraDetection(pixel, intrinsics, uncertain, pixel_sigma**2 * np.eye(2), **kw)
 
 
+def _along_and_across_the_ray(det, ps):
+    """Each particle's distance along the detection's viewing ray from POSE_1, and its distance from it."""
+    ray = pixel_to_ray_world(POSE_1, K, det.pixel)
+    rel = ps.states - POSE_1.centre
+    along = rel @ ray
+    return along, np.linalg.norm(rel - along[:, None] * ray, axis=1)
+
+
 # -- Alg. 5.4 ---------------------------------------------------------------------------------------------
 def test_prior_without_pose_noise_lies_on_the_viewing_ray_between_d_min_and_d_max():
     det = detection(POSE_1, position_sigma=0.0, attitude_deg=0.0)
     ps = det.back_projection_prior(3000, np.random.default_rng(1), 10.0, 150.0)
-    ray = pixel_to_ray_world(POSE_1, K, det.pixel)
-    rel = ps.states - POSE_1.centre
-    along = rel @ ray
-    perpendicular = np.linalg.norm(rel - along[:, None] * ray, axis=1)
+    along, perpendicular = _along_and_across_the_ray(det, ps)
     assert np.all(perpendicular < 1e-9)
     assert along.min() >= 10.0 and along.max() <= 150.0
     assert np.mean(along) == pytest.approx(80.0, abs=3.0)  # uniform in range
@@ -59,10 +64,7 @@ def test_prior_without_pose_noise_lies_on_the_viewing_ray_between_d_min_and_d_ma
 def test_prior_with_pose_noise_stays_close_to_the_ray_and_is_not_unimodal():
     det = detection(POSE_1, position_sigma=0.5, attitude_deg=1.0)
     ps = det.back_projection_prior(3000, np.random.default_rng(2), 10.0, 150.0)
-    ray = pixel_to_ray_world(POSE_1, K, det.pixel)
-    rel = ps.states - POSE_1.centre
-    along = rel @ ray
-    perpendicular = np.linalg.norm(rel - along[:, None] * ray, axis=1)
+    along, perpendicular = _along_and_across_the_ray(det, ps)
     assert np.all(perpendicular < 5 * (0.5 + along * math.radians(1.0)))  # a cone around the ray
     assert perpendicular.mean() > 0.1
     assert not ps.is_unimodal()  # a line ("banana") of particles
