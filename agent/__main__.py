@@ -20,10 +20,11 @@ import time
 from pathlib import Path
 
 from agent.agent import Agent
-from agent.camera_sensor import VideoSource
 from agent.config import AgentScenario, read_scenario_file
+from agent.net.keys import Keys
+from agent.net.zenoh_transport import ZenohTransport, load_config
 from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
-from agent.transport import Keys, ZenohTransport, load_config
+from agent.sensors.camera import VideoSource
 
 log = logging.getLogger("skymesh.agent")
 

@@ -5,7 +5,7 @@ broadcasts its beliefs, plans and moves. It knows nothing of clocks or processes
 (``agent.runtime``) calls it on the wall clock over Zenoh; a lockstep harness can call it over an
 in-memory bus. Only the transport and the clock differ.
 
-Every received message is decoded and validated (``agent.wire``) before it touches a belief; a
+Every received message is decoded and validated (``agent.net.wire``) before it touches a belief; a
 rejected message is counted by reason and logged once per (peer, reason). Duplicates and messages
 older than the last one from the same origin are dropped by ``(origin, seq)``.
 """
@@ -19,19 +19,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent import wire
-from agent.camera_sensor import sensor_from_config
+from agent.beliefs.grids import FireMapper
+from agent.beliefs.tracking import RemoteTrack, Tracker
 from agent.config import AgentScenario
 from agent.evaluation import TrackEvaluator
-from agent.fire_mapping import FireMapper
-from agent.fire_truth import decode_fire, decoy
-from agent.netem import LinkEmulator
-from agent.sending import SendScheduler
-from agent.sensing import Bearing
-from agent.topology import Topology
-from agent.tracking import RemoteTrack, Tracker
-from agent.transport import Keys
-from agent.vehicle import goal_to_setpoint, vehicle_from_config
+from agent.net import wire
+from agent.net.fire_truth import decode_fire, decoy
+from agent.net.keys import Keys
+from agent.net.netem import LinkEmulator
+from agent.net.sending import SendScheduler
+from agent.net.topology import Topology
+from agent.sensors.bearing import Bearing
+from agent.sensors.camera import sensor_from_config
+from agent.vehicles.kinematic import goal_to_setpoint, vehicle_from_config
 from perception.terrain import terrain_from_config
 from tasking.entropy import EntropyPlanner, EntropyPlannerConfig
 from tasking.planner import PlaceholderPlanner
@@ -57,7 +57,7 @@ class Counters:
 class Agent:
     """One agent of a fleet. ``transport`` needs ``publish(key, bytes)`` and ``drain() -> [Incoming]``.
 
-    ``camera``: an open external video source (:class:`agent.camera_sensor.VideoSource`) that replaces
+    ``camera``: an open external video source (:class:`agent.sensors.camera.VideoSource`) that replaces
     the synthetic camera; ``None`` uses the scenario's ``[sensor]`` (geometric bearings or the camera)."""
 
     def __init__(self, agent_id: str, index: int, scenario: AgentScenario, transport, keys: Keys,

@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.camera_sensor import CameraSensorConfig, sensor_config_from_dict
-from agent.grid_config import GridConfig
-from agent.netem import LinkPlan
-from agent.sending import SendConfig
-from agent.sensing import BearingSensorConfig
-from agent.tracking import TrackerConfig
+from agent.beliefs.grid_config import GridConfig
+from agent.beliefs.tracking import TrackerConfig
+from agent.net.netem import LinkPlan
+from agent.net.sending import SendConfig
+from agent.sensors.bearing import BearingSensorConfig
+from agent.sensors.camera import CameraSensorConfig, sensor_config_from_dict
 
 #: Top-level keys that the world reads; the agent accepts and ignores them.
 WORLD_KEYS = frozenset({"targets", "radio", "description", "fire", "decoys"})

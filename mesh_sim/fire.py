@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 import scipy.ndimage
 
-from agent.fire_truth import BURNING, BURNT, MAX_FIRE_CELLS, UNBURNT, encode_fire
+from agent.net.fire_truth import BURNING, BURNT, MAX_FIRE_CELLS, UNBURNT, encode_fire
 from perception.terrain import FlatTerrain
 
 __all__ = ["FireConfig", "FireWorld", "NEIGHBOURS"]
@@ -348,8 +348,8 @@ class FireWorld:
         return np.column_stack([ne, -self.heights[on] + 0.0])
 
     def payload(self, t: float) -> dict:
-        """The compact truth for the wire (:func:`agent.fire_truth.encode_fire`, decoded by
-        :func:`agent.fire_truth.decode_fire`)."""
+        """The compact truth for the wire (:func:`agent.net.fire_truth.encode_fire`, decoded by
+        :func:`agent.net.fire_truth.decode_fire`)."""
         return encode_fire(self.origin, self.config.cell, self.state_at(t), self.config.temperature_K)
 
     def coverage(self, geometry_origin, cell: float, shape, t: float) -> tuple[np.ndarray, np.ndarray]:

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent import wire
-from agent.fire_mapping import GridBeliefs, grid_geometry
-from agent.grid_config import GridConfig
-from agent.grid_exchange import GridReceiver
+from agent.beliefs.grid_config import GridConfig
+from agent.beliefs.grid_exchange import GridReceiver
+from agent.beliefs.grids import GridBeliefs, grid_geometry
+from agent.net import wire
 from mesh_sim.fire_scoring import roc
 
 __all__ = ["GridOracle", "EVAL_PERIOD", "grid_extent"]

@@ -27,7 +27,7 @@ import zenoh
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from agent.transport import router_config
+from agent.net.zenoh_transport import router_config
 from mesh_sim import results
 from mesh_sim.scenario import Scenario
 

@@ -1,7 +1,7 @@
 """The lockstep harness: a whole run in one process, deterministic, many times faster than real time.
 
 The same :class:`~agent.agent.Agent` class as a live run, over an in-memory bus
-(:class:`~agent.bus.InMemoryBus`) instead of Zenoh, stepped on simulation time instead of the wall
+(:class:`~agent.net.bus.InMemoryBus`) instead of Zenoh, stepped on simulation time instead of the wall
 clock: only the transport and the clock differ (DESIGN.md §4). At each step the world publishes the
 truth, every agent steps in turn, and the oracle absorbs the bearings; the observer, when enabled,
 logs the same messages it would receive live.
@@ -18,10 +18,10 @@ import uuid
 from pathlib import Path
 
 from agent.agent import Agent
-from agent.bus import InMemoryBus
-from agent.camera_sensor import VideoSource
+from agent.net.bus import InMemoryBus
+from agent.net.keys import Keys
 from agent.runtime import write_json
-from agent.transport import Keys
+from agent.sensors.camera import VideoSource
 from mesh_sim import results
 from mesh_sim.scenario import Scenario
 from mesh_sim.world import World

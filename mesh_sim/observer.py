@@ -1,7 +1,7 @@
 """The ground station: one process that watches a fleet on Zenoh and does all the Rerun logging (DESIGN.md §7).
 
 Agents stay light (no Rerun in them); the observer subscribes to ``telemetry/*``, ``belief/**`` and
-``sim/truth`` of one fleet, validates every message exactly as an agent would (``agent.wire.decode``
+``sim/truth`` of one fleet, validates every message exactly as an agent would (``agent.net.wire.decode``
 plus payload checks; rejects are counted by reason, logged once per (peer, reason), never raised), and
 logs one recording. The same observer works against a real fleet: it only needs a Zenoh endpoint.
 
@@ -52,8 +52,9 @@ import numpy as np
 import rerun as rr
 import zenoh
 
-from agent import wire
-from agent.transport import Incoming, Keys, ZenohTransport, load_config
+from agent.net import wire
+from agent.net.keys import Incoming, Keys
+from agent.net.zenoh_transport import ZenohTransport, load_config
 from fusion.measurement import azel_to_los
 from mesh_sim.observer_grids import GridImages
 from mesh_sim.observer_messages import parse_telemetry, parse_truth

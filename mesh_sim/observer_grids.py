@@ -1,7 +1,7 @@
 """Fire maps as images for the ground station: each agent's grid beside the true fire.
 
-Grid messages are deltas against acknowledged messages (:mod:`agent.grid_exchange`), so the observer
-rebuilds every agent's grid exactly as a receiver does — one :class:`~agent.grid_exchange.GridReceiver`
+Grid messages are deltas against acknowledged messages (:mod:`agent.beliefs.grid_exchange`), so the observer
+rebuilds every agent's grid exactly as a receiver does — one :class:`~agent.beliefs.grid_exchange.GridReceiver`
 per (belief type, geometry) it has seen, created from the first keyframe's header. Images are north
 up (row 0 is the northern edge), east to the right, coloured with a perceptual colour map from
 probability 0 (dark) to 1 (bright).
@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent import wire
-from agent.fire_mapping import GridBeliefs
-from agent.fire_truth import decode_fire
-from agent.grid_exchange import GridReceiver
+from agent.beliefs.grid_exchange import GridReceiver
+from agent.beliefs.grids import GridBeliefs
+from agent.net import wire
+from agent.net.fire_truth import decode_fire
 from fusion.grid_geometry import GridGeometry
 
 COLOURMAP = "inferno"  # chosen here
@@ -33,7 +33,7 @@ class GridImages:
         self._lut = _lut()
 
     def agent_image(self, origin: str, seq: int, payload: dict) -> np.ndarray:
-        """RGB image of ``origin``'s grid in message ``seq``; raises :class:`agent.wire.DecodeError`."""
+        """RGB image of ``origin``'s grid in message ``seq``; raises :class:`agent.net.wire.DecodeError`."""
         if not isinstance(payload, dict) or payload.get("belief") not in ("logodds", "beta"):
             raise wire.DecodeError("grid_geometry", "a grid message names its belief type")
         try:

@@ -1,6 +1,6 @@
 """What the ground station accepts: truth and telemetry payloads checked as strictly as an agent checks.
 
-Every check raises :class:`agent.wire.DecodeError` with a reason the observer counts; nothing here logs.
+Every check raises :class:`agent.net.wire.DecodeError` with a reason the observer counts; nothing here logs.
 """
 
 from __future__ import annotations
@@ -9,12 +9,12 @@ import re
 
 import numpy as np
 
-from agent import wire
+from agent.net import wire
 
 SYM_RTOL = 1e-6  # position covariance symmetry tolerance, relative to its largest entry
 PSD_RTOL = 1e-9  # smallest eigenvalue allowed, relative to the largest (negatives are clipped to 0)
 
-_AGENT_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")  # as agent.wire
+_AGENT_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")  # as agent.net.wire
 
 
 def _vector(value, n: int | None, name: str) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Compile a scenario's ``[radio]`` section into the agents' link plan (DESIGN.md §6).
 
-The plan is plain data (schema in :class:`agent.netem.LinkPlan`); every agent enforces it in its own
+The plan is plain data (schema in :class:`agent.net.netem.LinkPlan`); every agent enforces it in its own
 transport. A ``[radio]`` section, all keys optional::
 
     [radio]
@@ -8,7 +8,7 @@ transport. A ``[radio]`` section, all keys optional::
     mean_degree = 3.0          # random only: mean node degree (connected: a random spanning tree + edges)
     hub = "uav0"               # star only: the hub (default: the first agent)
     range = 250.0              # metres; required by "disk" (no fixed edges, only range), optional otherwise
-    preset = "wifi"            # ideal (default) | wifi | cellular | lossy  (agent.netem.PRESETS)
+    preset = "wifi"            # ideal (default) | wifi | cellular | lossy  (agent.net.netem.PRESETS)
     loss = 0.01                # netem-named overrides of the preset: loss (0..1), delay_ms, jitter_ms,
     delay_ms = 5.0             #   rate (bytes/s, 0 = unlimited), burst (bytes)
     [radio.gilbert_elliott]    # netem "loss gemodel p r 1-h 1-k"; replaces the Bernoulli loss
@@ -39,7 +39,7 @@ import math
 import random
 from itertools import combinations
 
-from agent.netem import PRESETS, GilbertElliott, LinkParams, LinkPlan
+from agent.net.netem import PRESETS, GilbertElliott, LinkParams, LinkPlan
 
 TOPOLOGIES = ("full", "ring", "star", "line", "tree", "random", "disk")
 PARAM_KEYS = ("loss", "delay_ms", "jitter_ms", "rate", "burst")
@@ -179,10 +179,10 @@ class _State:
 
 
 def compile_plan(radio: dict, agents: list[str], seed: int) -> dict:
-    """The link plan (plain data, see :class:`agent.netem.LinkPlan`) for a ``[radio]`` section.
+    """The link plan (plain data, see :class:`agent.net.netem.LinkPlan`) for a ``[radio]`` section.
 
     Raises ValueError naming the problem: unknown keys, topologies, presets, event kinds or agent names,
-    event times that go backwards, and anything :class:`agent.netem.LinkPlan` rejects.
+    event times that go backwards, and anything :class:`agent.net.netem.LinkPlan` rejects.
     """
     radio = {} if radio is None else radio
     if not isinstance(radio, dict):

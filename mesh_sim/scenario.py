@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agent.config import AgentScenario, read_scenario_file
-from agent.fire_truth import decoy
+from agent.net.fire_truth import decoy
 from mesh_sim.fire import FireConfig
 from mesh_sim.radio import compile_plan
 from mesh_sim.targets import targets_from_config

@@ -17,13 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
-from agent import wire
 from agent.agent import FUTURE_EPOCHS
+from agent.beliefs.tracking import Tracker
 from agent.evaluation import TrackEvaluator
+from agent.net import wire
+from agent.net.keys import Keys
+from agent.net.zenoh_transport import ZenohTransport, load_config
 from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
-from agent.sensing import Bearing
-from agent.tracking import Tracker
-from agent.transport import Keys, ZenohTransport, load_config
+from agent.sensors.bearing import Bearing
 from mesh_sim.fire import FireWorld
 from mesh_sim.grid_oracle import GridOracle, grid_extent
 from mesh_sim.scenario import load

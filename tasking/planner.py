@@ -20,7 +20,7 @@ Not here yet (full tasking arrives later): equal spacing on the circle (spec 004
 detection/tracking phases and dwell times (spec 000 §2.10), and the potential-field collision layer
 (spec 000 §2.9). Agents sharing a target orbit the same circle in the same direction.
 
-The planner returns a :class:`tasking.orbit.Goal` (plain data); ``agent.vehicle.goal_to_setpoint``
+The planner returns a :class:`tasking.orbit.Goal` (plain data); ``agent.vehicles.kinematic.goal_to_setpoint``
 turns it into a vehicle setpoint. ``altitude`` is metres above the local origin (positive up).
 """
 

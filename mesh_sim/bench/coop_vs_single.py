@@ -28,7 +28,7 @@ Estimators, all the project's own:
 * **skymesh EIF trajectory** — what a skymesh agent runs: a trajectory belief (``fusion.trajectory``,
   window of 8 states) updated with every raw bearing by the extended information filter
   (``Bearing3D``, Merino (3.52)), started at the floor point of the first bearing with its unscented
-  covariance (``perception.geolocation.geolocate``), as ``agent.tracking`` does. Twice: with the KF's
+  covariance (``perception.geolocation.geolocate``), as ``agent.beliefs.tracking`` does. Twice: with the KF's
   tracking model (``q = 0.1``) and with a near-static one (``q = 1e-4``). With one observer flying a
   straight leg, a constant-velocity target's range is unobservable from bearings (the classic
   bearings-only result: the observer must out-manoeuvre the target), so the tracking-model EIF slides
@@ -110,7 +110,7 @@ class Setup:
     q_static: float = 1e-4  # the EIF again with a near-static target model [m²/s³]
     speed_prior_m_s: float = 0.3  # velocity pseudo-prior of a new track (KF and EIF)
     floor_sigma_m: float = 0.05  # height error of the floor point that starts the EIF track
-    trajectory_window: int = 8  # agent.tracking.TrackerConfig.window
+    trajectory_window: int = 8  # agent.beliefs.tracking.TrackerConfig.window
 
     @property
     def focal_px(self) -> float:
@@ -141,7 +141,7 @@ ASSUMPTIONS = [
     "camera-mount misalignment is modelled, so the thesis's small cooperative bias is not reproduced.",
     "KF (§3.3) and EIF: constant velocity, q = 0.1 m²/s³ per axis (V_k not given; an RC car's manoeuvres), "
     "and the EIF again with q = 1e-4 (a still target); 0.3 m/s velocity pseudo-prior; EIF track started at the "
-    "floor point of the first bearing (UT, floor height σ 5 cm), as agent.tracking starts tracks.",
+    "floor point of the first bearing (UT, floor height σ 5 cm), as agent.beliefs.tracking starts tracks.",
     "Table 3.1 is compared with the per-step q̂* and with the KF output (the thesis does not say which its "
     "figures show). Statistics pooled over runs and steps after a 10 s warm-up; fixed seed.",
 ]
@@ -277,7 +277,7 @@ def kf_estimates(scenario: str, x_hat, d_hat, setup: Setup) -> tuple[np.ndarray,
 def eif_estimates(x_hat, d_hat, setup: Setup, q: float) -> np.ndarray:
     """A skymesh agent's track: trajectory belief (constant velocity, spectral density ``q``), EIF update with
     every raw bearing (all observers)."""
-    from agent.sensing import bearing_covariance
+    from agent.sensors.bearing import bearing_covariance
     from fusion.measurement import Bearing3D, los_to_azel
     from fusion.motion import ConstantVelocity
     from fusion.trajectory import Trajectory, TrajectoryModel
@@ -298,7 +298,7 @@ def eif_estimates(x_hat, d_hat, setup: Setup, q: float) -> np.ndarray:
             for o in range(observers):
                 azel = los_to_azel(d_hat[r, k, o])
                 bearings.append((x_hat[r, k, o], azel, bearing_covariance(azel[1], sigma)))
-            if belief is None:  # start the track as agent.tracking does: the floor point of the ray
+            if belief is None:  # start the track as agent.beliefs.tracking does: the floor point of the ray
                 sensor, azel, R = bearings[0]
                 located = geolocate(sensor, azel, R, floor, sensor_sigma=setup.position_sigma_m,
                                     terrain_sigma=setup.floor_sigma_m, max_range=50.0)

@@ -7,7 +7,7 @@ same run as its plain-numpy bound, interleaved (see :mod:`mesh_sim.bench.common`
   out=buf)`` into a preallocated array;
 * ``LogOddsGrid.fuse`` (Merino (4.4), Alg. 4.3: ``e_a + e_b``) — bound ``np.add(e_a, e_b, out=buf)``;
 * ``BetaGrid.update(m, n)`` (Merino Alg. 4.4, (4.29)-(4.30)) — bound two ``np.add`` into buffers;
-* ``encode_grid`` (:mod:`agent.grid_codec`): a delta with 1 % and 10 % of the cells changed since the
+* ``encode_grid`` (:mod:`agent.net.grid_codec`): a delta with 1 % and 10 % of the cells changed since the
   baseline, and a keyframe — bound for deltas ``idx = np.flatnonzero(a != b)`` and
   ``a.ravel()[idx].astype(float32).tobytes()``; for the keyframe ``zlib.compress(float32 bytes)`` at the
   codec's level (no numpy-only way to make a compressed keyframe);
@@ -25,7 +25,7 @@ a random fraction of the cells. The codec works on ``L = 1`` (log-odds); message
 
 Goals (chosen here): every operation within :data:`SPEED_GOAL` x of its bound, except the 10 % delta
 encode (reported, not a goal: it also checks whether a keyframe would be smaller — see
-:data:`agent.grid_codec.KEYFRAME_PROBE_FRACTION` — which the bound does not); and a delta for 1 % of
+:data:`agent.net.grid_codec.KEYFRAME_PROBE_FRACTION` — which the bound does not); and a delta for 1 % of
 the cells changed below :data:`BYTES_GOAL` of the keyframe's bytes.
 """
 
@@ -37,8 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent import grid_codec as codec
-from agent import wire
+from agent.net import grid_codec as codec
+from agent.net import wire
 from fusion.grid import BetaGrid, LogOddsGrid
 from fusion.grid_geometry import GridGeometry
 from mesh_sim.bench import common

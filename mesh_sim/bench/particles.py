@@ -25,7 +25,7 @@ through :class:`fusion.particle_fusion.ParticleChannelFilter` with the common pr
 node's mean in posterior standard deviations (Mahalanobis distance, RMS over nodes and seeds) and the
 standard-deviation ratio ``(det Σ / det P)^{1/(2d)}`` (1 = right spread, > 1 conservative).
 
-**Message bytes** per N: the full set (N x (3 + 1) doubles, :mod:`agent.particle_wire`) as payload and as a
+**Message bytes** per N: the full set (N x (3 + 1) doubles, :mod:`agent.net.particle_wire`) as payload and as a
 whole envelope, and the 8-component compressed form.
 
 Goals (chosen here): the N = 200 message within 6400-6700 bytes (thesis ≈ 6400); Bayes fusion faster than
@@ -169,8 +169,8 @@ def tree_run(n: int, seed: int, method: str) -> list[dict]:
 
 
 def message_sizes(n: int, rng: np.random.Generator) -> dict:
-    from agent import particle_wire as pw
-    from agent import wire
+    from agent.net import particle_wire as pw
+    from agent.net import wire
     from fusion.particles import ParticleSet
 
     ps = ParticleSet.from_unnormalised(rng.normal(size=(n, DIM)) + TRUTH, rng.random(n))
@@ -313,8 +313,8 @@ def report(result: dict, console=None) -> None:
         ["N", "numbers", "payload", "envelope", f"compressed ({s['compressed_k']} comp.)", "thesis"],
         [[m["n"], m["numbers_bytes"], m["payload_bytes"], m["envelope_bytes"], m["compressed_bytes"],
           f"≈{THESIS_MESSAGE_BYTES}" if m["n"] == 200 else "—"] for m in result["messages"]],
-        "Payload: agent.particle_wire full set (raw little-endian doubles in a msgpack map); envelope: the whole "
-        "agent.wire message; compressed: k-means + moment-matched mixture (mean and covariance kept).",
+        "Payload: agent.net.particle_wire full set (raw little-endian doubles in a msgpack map); envelope: the whole "
+        "agent.net.wire message; compressed: k-means + moment-matched mixture (mean and covariance kept).",
     )
     for goal in result["goals"].values():
         console.print(f"{common.verdict(goal['pass'])}  {goal['description']}", highlight=False)

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agent.sensors.bearing import bearing_covariance
 from mesh_sim.bench import common
 
 NAME = "perception"
@@ -51,7 +52,7 @@ PAPER_GEOLOCATION_MS = 86.0  # Ross et al. Sec. VI.D (spec 002 §4.3): mean time
 ALTITUDE_M = 80.0  # geolocation scene: the default scenario's flight altitude
 TILT_DEG = -60.0  # geolocation scene: gimbal tilt (0 = forward, -90 = nadir); chosen here
 DEM_CELL_M = 30.0  # Ross et al.: a USGS DEM (30 m grid)
-BEARING_SIGMA_DEG = 1.0  # agent.sensing.BearingSensorConfig default line-of-sight noise
+BEARING_SIGMA_DEG = 1.0  # agent.sensors.bearing.BearingSensorConfig default line-of-sight noise
 
 
 @dataclass(frozen=True)
@@ -130,7 +131,7 @@ def jobs(width: int, height: int) -> dict[str, Callable[[], object]]:
     los = pixel_to_ray_world(pose, intrinsics, pixel)
     azel = los_to_azel(los)
     sigma = math.radians(BEARING_SIGMA_DEG)
-    R_azel = np.diag([(sigma / max(abs(math.cos(azel[1])), 1e-3)) ** 2, sigma**2])  # agent.sensing.bearing_covariance
+    R_azel = bearing_covariance(azel[1], sigma)
     for terrain in (flat, dem):
         if pixel_to_ground(pose, intrinsics, terrain, pixel) is None:
             raise RuntimeError("geolocation scene: the pixel's ray misses the terrain")

@@ -1,7 +1,7 @@
 """``skymesh bench transport``: per-hop latency and throughput of the agent transport vs bare Zenoh.
 
 Set-up (the deployment of ``skymesh run`` on one machine): this process opens a Zenoh router on a free
-loopback port (``agent.transport.router_config``) and starts ONE echo process (``python -m
+loopback port (``agent.net.zenoh_transport.router_config``) and starts ONE echo process (``python -m
 mesh_sim.bench.transport --echo ...``, a hidden mode of this module) that connects to it as a client.
 The pinging side is a client session of this process too, so every message travels client -> router
 -> client, exactly one agent-to-agent hop; a round trip is two hops (one-way = RTT / 2).
@@ -13,10 +13,10 @@ drifts of the machine hit all alike); the ratios agent / bare are the result:
   encoded trajectory track (~4.9 kB). The echo's callback takes the payload as bytes and puts it back
   on the pong key; the pinger's callback checks the sequence number and sets a ``threading.Event``
   that the main thread waits on (the fastest way to wait in Python; ``dependencies.md`` §2.8).
-* **agent**: :class:`agent.transport.ZenohTransport` (``publish`` + ``drain()``, the agent's bounded
+* **agent**: :class:`agent.net.zenoh_transport.ZenohTransport` (``publish`` + ``drain()``, the agent's bounded
   queue filled by Zenoh's callback thread), busy-polled with a ``POLL_SLEEP_S`` sleep when the queue is
   empty (the agent drains once per step; polling is what it would take to react at once), and the wire
-  format: a ``track`` :class:`agent.wire.Envelope` carrying one real trajectory belief
+  format: a ``track`` :class:`agent.net.wire.Envelope` carrying one real trajectory belief
   (``TrajectoryModel(ConstantVelocity(3, 3.0), 0.2, 8)``, ``wire.encode_trajectory``). Each side
   encodes (``encode_trajectory`` + ``wire.encode``) what it sends and decodes and validates
   (``wire.decode`` + ``decode_trajectory``: shapes, finiteness, symmetric PSD information matrix) what
@@ -104,7 +104,7 @@ class Codec:
     model: object
 
     def encode(self, traj, seq: int, stamp: float, acked: int | None) -> bytes:
-        from agent import wire
+        from agent.net import wire
 
         payload = {"tracks": [{"id": 1, "belief": wire.encode_trajectory(traj), "last_measured": stamp}]}
         acks = {} if acked is None else {self.peer: acked}
@@ -113,7 +113,7 @@ class Codec:
 
     def decode(self, data: bytes):
         """Returns ``(envelope, trajectory)``; raises ``wire.DecodeError`` on anything invalid."""
-        from agent import wire
+        from agent.net import wire
 
         env = wire.decode(data, expected_origin=self.peer)
         tracks = env.payload.get("tracks")
@@ -124,7 +124,7 @@ class Codec:
 
 class _Keys:
     def __init__(self, fleet: str):
-        from agent.transport import Keys
+        from agent.net.keys import Keys
 
         root = Keys(fleet).root
         self.bare_ping, self.bare_pong = f"{root}/bench/bare/ping", f"{root}/bench/bare/pong"
@@ -260,7 +260,8 @@ class _Bench:
     def __enter__(self) -> _Bench:
         import zenoh
 
-        from agent.transport import Keys, ZenohTransport, client_config, router_config
+        from agent.net.keys import Keys
+        from agent.net.zenoh_transport import ZenohTransport, client_config, router_config
         from mesh_sim.launcher import free_port
 
         zenoh.init_log_from_env_or("error")
@@ -442,7 +443,7 @@ class _Bench:
 
     # -- agent path -----------------------------------------------------------------------------------
     def _agent_round_trips(self, n: int) -> tuple[list[float], int]:
-        from agent import wire
+        from agent.net import wire
 
         self._mode("agent-echo")
         rtts, lost = [], 0
@@ -509,8 +510,9 @@ class _Bench:
 def echo_main(connect: str, fleet: str, parent: int, poll_sleep: float = POLL_SLEEP_S) -> int:
     """Echo (or count) what arrives on the ping keys; obey the control key. Exits on ``quit``, or when
     the parent process is gone."""
-    from agent import wire
-    from agent.transport import Keys, ZenohTransport, client_config
+    from agent.net import wire
+    from agent.net.keys import Keys
+    from agent.net.zenoh_transport import ZenohTransport, client_config
 
     keys = _Keys(fleet)
     transport = ZenohTransport("echo", Keys(fleet), client_config([connect]), [keys.queue_ping], liveliness=False)

@@ -9,8 +9,8 @@ import msgpack
 import numpy as np
 import pytest
 
-from agent import wire
-from agent.fire_truth import BURNING, BURNT, UNBURNT, decode_fire
+from agent.net import wire
+from agent.net.fire_truth import BURNING, BURNT, UNBURNT, decode_fire
 from mesh_sim.fire import NEIGHBOURS, FireConfig, FireWorld
 from perception.terrain import FlatTerrain, HillsTerrain
 

@@ -19,9 +19,9 @@ import pytest
 from scipy.stats import chi2
 
 from agent.agent import Agent
-from agent.bus import InMemoryBus
-from agent.sensing import GeometricBearingSensor
-from agent.transport import Keys
+from agent.net.bus import InMemoryBus
+from agent.net.keys import Keys
+from agent.sensors.bearing import GeometricBearingSensor
 from mesh_sim.launcher import Launcher, new_run_dir
 from mesh_sim.lockstep import agent_subscriptions, run_lockstep
 from mesh_sim.scenario import load

@@ -16,8 +16,9 @@ import pytest
 import zenoh
 from rerun.chunk import RrdReader
 
-from agent import wire
-from agent.transport import Incoming, Keys, ZenohTransport, client_config, router_config
+from agent.net import wire
+from agent.net.keys import Incoming, Keys
+from agent.net.zenoh_transport import ZenohTransport, client_config, router_config
 from fusion.measurement import azel_to_los
 from mesh_sim.observer import Observer, cov_to_ellipsoid, quat_xyzw_to_matrix, ray_end
 

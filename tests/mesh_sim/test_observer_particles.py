@@ -6,7 +6,7 @@ import uuid
 
 import numpy as np
 
-from agent.transport import Incoming, Keys
+from agent.net.keys import Incoming, Keys
 from mesh_sim.observer import Observer
 from tests.mesh_sim.test_observer import _envelope, _read_rrd, _telemetry
 

@@ -6,7 +6,7 @@ from collections import Counter
 
 import pytest
 
-from agent.netem import GilbertElliott, LinkEmulator, LinkParams, LinkPlan
+from agent.net.netem import GilbertElliott, LinkEmulator, LinkParams, LinkPlan
 from mesh_sim.radio import compile_plan, topology_edges
 
 AGENTS = [f"uav{i}" for i in range(8)]

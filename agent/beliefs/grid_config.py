@@ -1,0 +1,76 @@
+"""``[grid]``: the agent's certainty grid — belief type, fusion policy, sensor model, exchange, alarms."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from agent.sensors.fire_camera import FireCameraConfig
+from fusion.channel_filter import Policy
+from perception.grid_likelihood import DetectionModel, PoseNoise
+
+BELIEFS = ("logodds", "beta")
+INTERSECTS = ("chernoff", "max", "half")
+
+
+@dataclass(frozen=True)
+class GridConfig:
+    belief: str = "logodds"  # "logodds" (Merino Alg. 4.2/4.3) or "beta" (Alg. 4.4/4.5)
+    cell: float = 5.0  # m (chosen here)
+    policy: str = "hybrid"  # channel filters: exact, ci (intersection only), hybrid, naive
+    intersect: str = "chernoff"  # the conservative rule on loops: chernoff (WEP), max (Merino (4.5)/(4.39)), half
+    period: float = 2.0  # s between grid broadcasts (chosen here)
+    delta: bool = True  # send deltas against acknowledged messages (False: a keyframe every time)
+    keyframe_every: int = 10  # messages between forced keyframes (chosen here)
+    alarm_threshold: float = 0.8  # cell probability above which cells form alarms (Merino's example value)
+    alarm_period: float = 5.0  # s between alarm extractions, T of Merino §4.2.2 (chosen here)
+    plan_spread: float = 0.0  # planning only: omega of (6.6) per planning step (0: plan on the map as it is)
+    plan_steps: int = 4  # planning only: fire-spread steps predicted before the entropy is computed (chosen here)
+    detection: DetectionModel = field(default_factory=DetectionModel)
+    pose_noise: PoseNoise = field(default_factory=PoseNoise)
+    camera: FireCameraConfig = field(default_factory=FireCameraConfig)
+
+    def __post_init__(self):
+        if self.belief not in BELIEFS:
+            raise ValueError(f"grid.belief must be one of {BELIEFS}, got {self.belief!r}")
+        if self.intersect not in INTERSECTS:
+            raise ValueError(f"grid.intersect must be one of {INTERSECTS}, got {self.intersect!r}")
+        Policy(self.policy)  # ValueError names the bad policy
+        for name in ("cell", "period", "alarm_period"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (np.isfinite(value) and value > 0):
+                raise ValueError(f"grid.{name} must be a positive number, got {value!r}")
+        if not 0.0 < self.alarm_threshold < 1.0:
+            raise ValueError(f"grid.alarm_threshold must be in (0, 1), got {self.alarm_threshold!r}")
+        if not 0.0 <= self.plan_spread <= 1.0:
+            raise ValueError(f"grid.plan_spread must be a probability, got {self.plan_spread!r}")
+        if isinstance(self.plan_steps, bool) or not isinstance(self.plan_steps, int) or self.plan_steps < 1:
+            raise ValueError(f"grid.plan_steps must be a positive integer, got {self.plan_steps!r}")
+        if isinstance(self.keyframe_every, bool) or not isinstance(self.keyframe_every, int) or self.keyframe_every < 1:
+            raise ValueError(f"grid.keyframe_every must be a positive integer, got {self.keyframe_every!r}")
+
+    @classmethod
+    def from_dict(cls, d: dict) -> GridConfig:
+        """From a scenario's ``[grid]`` table; angles in degrees (``*_deg``); unknown keys are errors."""
+        d = dict(d)
+        detection = {k: d.pop(k) for k in ("pd", "pf", "d_max", "negative") if k in d}
+        noise = {k: d.pop(k) for k in ("position_sigma",) if k in d}
+        if "attitude_sigma_deg" in d:
+            noise["attitude_sigma"] = math.radians(_number(d.pop("attitude_sigma_deg"), "attitude_sigma_deg"))
+        camera = {k: d.pop(k) for k in ("width", "height", "threshold_K", "decoy_K") if k in d}
+        if "hfov_deg" in d:
+            camera["hfov"] = math.radians(_number(d.pop("hfov_deg"), "hfov_deg"))
+        known = {f.name for f in fields(cls)} - {"detection", "pose_noise", "camera"}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown grid settings: {sorted(unknown)}")
+        return cls(**d, detection=DetectionModel(**detection), pose_noise=PoseNoise(**noise),
+                   camera=FireCameraConfig(**camera))
+
+
+def _number(value, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"grid.{name} must be a number, got {value!r}")
+    return float(value)

@@ -1,0 +1,103 @@
+"""Grid messages that respect bandwidth: deltas against what every neighbour acknowledged.
+
+A certainty grid is mostly unchanged between two broadcasts (a camera sees a few hundred cells of
+thousands), so a message carries only the cells that changed since a *baseline*: an earlier message of
+ours that every current neighbour has acknowledged decoding (:mod:`agent.net.grid_codec`). Receivers keep
+the last messages they decoded from each origin, so they can rebuild the full grid from the baseline.
+
+* **Sender** (:class:`GridSender`): remembers the quantized layers of its recent messages and, per
+  neighbour, the newest of its messages that neighbour acknowledged. The baseline of a broadcast is the
+  oldest acknowledgement among the current neighbours; a keyframe is sent when a neighbour has
+  acknowledged nothing yet (or its acknowledgement is no longer in the history), and every
+  ``keyframe_every`` messages so that late joiners and observers catch up.
+* **Receiver** (:class:`GridReceiver`): per origin, the layers of the messages it decoded (for the next
+  deltas) and the newest one it decoded — the acknowledgement it gives back in its own grid messages.
+
+Losing a message loses no update: every message carries the sender's whole current state (as a delta
+against something the receiver provably holds), so the next one that arrives brings everything. A
+delta on a baseline the receiver does not hold is rejected (``grid_missing_baseline``) and costs one
+period, never a wrong grid.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import numpy as np
+
+from agent.net import wire
+from agent.net.grid_codec import GridHistory, decode_grid, encode_grid, quantize
+
+KEYFRAME_EVERY = 10  # messages between forced keyframes (chosen here: a late joiner waits at most this many)
+HISTORY = 16  # messages remembered per origin, on both sides (chosen here)
+
+
+class GridSender:
+    """The sending side of one grid belief."""
+
+    def __init__(self, keyframe_every: int = KEYFRAME_EVERY, delta: bool = True, history: int = HISTORY):
+        if keyframe_every < 1:
+            raise ValueError(f"keyframe_every must be at least 1, got {keyframe_every}")
+        self.keyframe_every = keyframe_every
+        self.delta = delta
+        self.sent = GridHistory(history)
+        self.acked: dict[str, int] = {}  # neighbour -> newest of our messages it decoded
+        self._since_keyframe = keyframe_every  # the first message is a keyframe
+
+    def acknowledge(self, peer: str, seq: int) -> None:
+        """``peer`` says it decoded our message ``seq``."""
+        if seq > self.acked.get(peer, -1):
+            self.acked[peer] = seq
+
+    def baseline(self, neighbours: Iterable[str]) -> tuple[int, np.ndarray] | None:
+        """The message every neighbour holds (the oldest acknowledgement among them), or ``None``."""
+        if not self.delta or self._since_keyframe + 1 >= self.keyframe_every:
+            return None
+        neighbours = list(neighbours)
+        if not neighbours or any(p not in self.acked for p in neighbours):
+            return None
+        base = min(self.acked[p] for p in neighbours)
+        layers = self.sent.get(base)
+        return None if layers is None else (base, layers)
+
+    def encode(self, layers: np.ndarray, neighbours: Iterable[str]) -> tuple[dict, np.ndarray]:
+        """The codec payload of ``layers`` for the current neighbours, and the quantized layers the
+        receivers will reconstruct (what the caller must record as sent)."""
+        base = self.baseline(neighbours)
+        payload = encode_grid(layers, None if base is None else base[1], None if base is None else base[0])
+        return payload, quantize(layers)
+
+    def sent_as(self, seq: int, quantized: np.ndarray, payload: dict) -> None:
+        """Record that message ``seq`` left with ``payload`` (call only for messages actually sent)."""
+        self.sent.put(seq, quantized)
+        self._since_keyframe = 0 if payload.get("mode") == "key" else self._since_keyframe + 1
+
+
+class GridReceiver:
+    """The receiving side: rebuilds every origin's grid from keyframes and deltas."""
+
+    def __init__(self, shape: tuple[int, int], layers: int, history: int = HISTORY):
+        self.shape = tuple(shape)
+        self.layers = layers
+        self.history = history
+        self._origins: dict[str, GridHistory] = {}
+
+    def decode(self, origin: str, seq: int, payload) -> np.ndarray:
+        """The full (quantized) layers of message ``seq`` from ``origin``; raises
+        :class:`agent.net.wire.DecodeError` (nothing is stored then)."""
+        store = self._origins.setdefault(origin, GridHistory(self.history))
+        latest = store.latest()
+        if latest is not None and seq <= latest[0]:
+            raise wire.DecodeError("grid_stale", f"grid message {seq} is not newer than {latest[0]}")
+        layers = decode_grid(payload, self.shape, self.layers, store.get)
+        store.put(seq, layers)
+        return layers
+
+    def acks(self) -> dict[str, int]:
+        """Origin -> the newest of its messages decoded here (what our grid messages acknowledge)."""
+        out = {}
+        for origin, store in self._origins.items():
+            latest = store.latest()
+            if latest is not None:
+                out[origin] = latest[0]
+        return out

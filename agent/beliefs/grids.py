@@ -1,0 +1,187 @@
+"""The agent's fire map: a certainty grid built from its thermal camera and fused with its neighbours'.
+
+Merino Alg. 4.3 (log-odds) / Alg. 4.5 (Beta), with the generic channel filter of
+:mod:`fusion.channel_filter` in place of the thesis's "on send, ``l_ij = l_i``": a neighbour is assumed
+to hold only what it acknowledged. On a tree the map equals the centralized one; on loops (``hybrid``
+on a non-bridge link, or ``ci``) the grids are combined by a conservative rule instead — the per-cell
+weighted log-odds at the Chernoff point, or Merino's max rules (4.5)/(4.39).
+
+* **sense**: one thermal frame -> per-cell evidence (:class:`agent.sensors.fire_camera.FireCamera`) -> the local
+  update (Alg. 4.2 / Alg. 4.4 lines 5-6);
+* **send**: every ``period`` a grid message, a delta against what every neighbour acknowledged
+  (:mod:`agent.beliefs.grid_exchange`); the channel filter records the *quantized* grid as sent, exactly what
+  the receivers rebuild;
+* **receive**: decode (geometry and belief type must match ours), fuse through the channel filter;
+* **alarms**: every ``alarm_period`` the fused grid is thresholded into Gaussian alarms (Merino (4.20),
+  :func:`fusion.grid_alarms.extract_alarms`) with their class probability — the hand-off to the
+  information-filter layer of Merino's hybrid scheme (Ch. 8). They are re-extracted from the grid each
+  time, never accumulated, so the grid's evidence is not counted twice.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+
+from agent.beliefs.grid_config import GridConfig
+from agent.beliefs.grid_exchange import HISTORY, GridReceiver, GridSender
+from agent.net import wire
+from agent.net.grid_codec import encoded_size
+from agent.sensors.fire_camera import FireCamera
+from fusion.channel_filter import ChannelFilter
+from fusion.fire_spread import FireSpreadModel
+from fusion.grid import BetaGrid, LogOddsGrid
+from fusion.grid_alarms import Alarm, extract_alarms
+from fusion.grid_geometry import GridGeometry
+from fusion.grid_intersect import chernoff_intersect, half_intersect, max_intersect
+
+INTERSECT_RULES = {"chernoff": chernoff_intersect, "max": max_intersect, "half": half_intersect}
+
+
+def grid_geometry(area: tuple[float, float, float, float], cell: float, terrain) -> GridGeometry:
+    """The grid over the scenario area, cell centres on the (flat) ground."""
+    level = getattr(terrain, "level", None)
+    return GridGeometry.covering(area[:2], area[2:], cell, height=-(level or 0.0))
+
+
+class GridBeliefs:
+    """Layers <-> grid beliefs of one type (what travels is ``(L, rows, cols)`` float arrays)."""
+
+    def __init__(self, belief: str, geometry: GridGeometry):
+        self.belief = belief
+        self.geometry = geometry
+        self.layers = 1 if belief == "logodds" else 2
+
+    def uniform(self):
+        return LogOddsGrid.uniform(self.geometry) if self.belief == "logodds" else BetaGrid.uniform(self.geometry)
+
+    def to_layers(self, grid) -> np.ndarray:
+        return grid.evidence[None] if self.belief == "logodds" else np.stack([grid.alpha, grid.beta])
+
+    def from_layers(self, layers: np.ndarray):
+        if self.belief == "logodds":
+            return LogOddsGrid(self.geometry, layers[0])
+        return BetaGrid(self.geometry, layers[0], layers[1])
+
+
+class FireMapper:
+    """One agent's fire map: local evidence, exchange with neighbours through channel filters, alarms."""
+
+    def __init__(self, agent_id: str, config: GridConfig, area: tuple[float, float, float, float], terrain,
+                 seed: int):
+        self.id = agent_id
+        self.config = config
+        self.terrain = terrain
+        self.geometry = grid_geometry(area, config.cell, terrain)
+        self.beliefs = GridBeliefs(config.belief, self.geometry)
+        self.grid = self.beliefs.uniform()
+        # the channel filters remember as many sent grids as the exchange does: a whole grid per message
+        self.channels = ChannelFilter(self.beliefs.uniform(), config.policy, INTERSECT_RULES[config.intersect],
+                                      history=HISTORY)
+        self.sender = GridSender(config.keyframe_every, config.delta)
+        self.receiver = GridReceiver(self.geometry.shape, self.beliefs.layers)
+        self.camera = FireCamera(config.camera, config.detection, config.pose_noise, seed)
+        self.cells_ned = self.geometry.centres_ned()
+        self.alarms: list[Alarm] = []
+        self._next_send = 0.0
+        self._next_alarms = 0.0
+        self.fusions: Counter = Counter()  # method -> grids fused
+        self.message_bytes: list[int] = []  # payload bytes of each grid message sent
+        self.keyframes = 0
+
+    # -- local evidence ---------------------------------------------------------------------------
+    def sense(self, state, fires: list, decoys: list):
+        """One frame: update the local grid; returns the evidence (for the simulator's centralized map)."""
+        ev = self.camera.evidence(state, fires, decoys, self.cells_ned, self.geometry.cell, self.terrain)
+        if self.config.belief == "logodds":
+            self.grid = self.grid.update_cells(ev.index, ev.llr)
+        else:
+            self.grid = self.grid.update_cells(ev.index, ev.m, ev.n)
+        return ev
+
+    def probability(self) -> np.ndarray:
+        return self.grid.probability()
+
+    def planning_probability(self) -> np.ndarray:
+        """The map the explorer plans on: with ``plan_spread`` the known fire — cells above the alarm
+        threshold — is predicted to spread ``plan_steps`` steps (Merino (6.5)-(6.6), noisy-OR), and each
+        cell takes the larger of its probability and that prediction, so the cells around known fires
+        regain entropy and get revisited as the front moves. Unexplored cells (p = 0.5) are not treated as
+        burning: the thesis's prediction assumes a small fire prior, not the grid's 0.5. Only the plan sees
+        the prediction; the shared map stays static, which keeps channel filters exact."""
+        p = self.probability()
+        if self.config.plan_spread == 0.0:
+            return p
+        known = np.where(p > self.config.alarm_threshold, p, 0.0)
+        model = FireSpreadModel(burn=0.0, spread=self.config.plan_spread)
+        return np.maximum(p, model.predict(known, np.zeros_like(p), self.config.plan_steps)[0])
+
+    def update_alarms(self, t: float) -> list[Alarm]:
+        if t + 1e-9 >= self._next_alarms:
+            self._next_alarms = t + self.config.alarm_period
+            self.alarms = extract_alarms(self.probability(), self.geometry, self.config.alarm_threshold)
+        return self.alarms
+
+    # -- exchange ---------------------------------------------------------------------------------
+    def due(self, t: float) -> bool:
+        if t + 1e-9 < self._next_send:
+            return False
+        self._next_send = t + self.config.period
+        return True
+
+    def outgoing(self, neighbours: list[str]) -> tuple[dict, np.ndarray]:
+        """The grid message payload for the current neighbours and the quantized layers it carries."""
+        codec, quantized = self.sender.encode(self.beliefs.to_layers(self.grid), neighbours)
+        payload = {"geometry": self.geometry.to_dict(), "belief": self.config.belief, "grid": codec,
+                   "acks": self.receiver.acks()}
+        return payload, quantized
+
+    def sent(self, seq: int, payload: dict, quantized: np.ndarray) -> None:
+        """Message ``seq`` left: the channel filters now assume neighbours that acknowledge it hold it."""
+        self.sender.sent_as(seq, quantized, payload["grid"])
+        self.channels.on_send(self.beliefs.from_layers(quantized), seq)
+        self.message_bytes.append(encoded_size(payload["grid"]))
+        self.keyframes += payload["grid"].get("mode") == "key"
+
+    def receive(self, origin: str, seq: int, payload: dict, tree_edge: bool) -> str:
+        """Decode and fuse a neighbour's grid message; returns the fusion method. Raises
+        :class:`agent.net.wire.DecodeError` on a bad message (nothing is changed then)."""
+        if not isinstance(payload, dict) or payload.get("belief") != self.config.belief:
+            raise wire.DecodeError("grid_geometry", f"expected a {self.config.belief} grid")
+        try:
+            GridGeometry.from_dict(payload.get("geometry")).check_same(self.geometry)
+        except (ValueError, TypeError, AttributeError) as err:
+            raise wire.DecodeError("grid_geometry", str(err)) from None
+        acks = payload.get("acks", {})
+        if not isinstance(acks, dict) or not all(isinstance(v, int) and v >= 0 for v in acks.values()):
+            raise wire.DecodeError("bad_field", "grid acks must map peers to sequence numbers")
+        layers = self.receiver.decode(origin, seq, payload.get("grid"))
+        try:
+            received = self.beliefs.from_layers(layers)
+        except ValueError as err:  # e.g. negative Beta counts
+            raise wire.DecodeError("grid_bad_values", str(err)) from None
+        ours = acks.get(self.id)
+        if ours is not None:
+            self.sender.acknowledge(origin, ours)
+        out = self.channels.on_receive(origin, self.grid, received, ours, seq, tree_edge)
+        self.grid = out.fused
+        self.fusions[out.method] += 1
+        return out.method
+
+    # -- results ----------------------------------------------------------------------------------
+    def metrics(self) -> dict:
+        sizes = np.asarray(self.message_bytes, float)
+        return {
+            "belief": self.config.belief,
+            "shape": list(self.geometry.shape),
+            "frames": self.camera.frames,
+            "grid_messages": int(sizes.size),
+            "grid_keyframes": int(self.keyframes),
+            "grid_bytes": int(sizes.sum()),
+            "grid_message_bytes_mean": float(sizes.mean()) if sizes.size else None,
+            "grid_message_bytes_max": int(sizes.max()) if sizes.size else None,
+            "grid_fusions": dict(self.fusions),
+            "alarms": [{"mean": a.mean.tolist(), "cov": a.cov.tolist(), "probability": a.probability,
+                        "cells": a.cells} for a in self.alarms],
+        }

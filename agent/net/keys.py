@@ -1,0 +1,45 @@
+"""The fleet's key space and what a transport hands the agent (DESIGN.md §5). No Zenoh here.
+
+Key space ``skymesh/<fleet>/...``: ``belief/<kind>/<agent>``, ``telemetry/<agent>``,
+``sim/{truth,clock,measurement/<agent>}`` and liveliness tokens ``alive/<agent>``. The fleet name
+isolates concurrent runs on one machine.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Incoming:
+    key: str
+    data: bytes
+    received_at: float  # wall clock [s]
+
+
+class Keys:
+    """The key expressions of one fleet."""
+
+    def __init__(self, fleet: str):
+        if not fleet or any(c in fleet for c in "/*$#? "):
+            raise ValueError(f"fleet name {fleet!r} must be a non-empty key chunk (no / * $ # ? or spaces)")
+        self.root = f"skymesh/{fleet}"
+
+    def belief(self, kind: str, agent: str) -> str:
+        return f"{self.root}/belief/{kind}/{agent}"
+
+    def telemetry(self, agent: str) -> str:
+        return f"{self.root}/telemetry/{agent}"
+
+    def sim(self, name: str) -> str:
+        return f"{self.root}/sim/{name}"
+
+    def alive(self, agent: str) -> str:
+        return f"{self.root}/alive/{agent}"
+
+    def parse(self, key: str) -> tuple[str, ...]:
+        """The chunks after the fleet root, e.g. ``("belief", "track", "uav3")``."""
+        prefix = self.root + "/"
+        if not key.startswith(prefix):
+            raise ValueError(f"key {key!r} is not in fleet {self.root!r}")
+        return tuple(key[len(prefix):].split("/"))

@@ -1,0 +1,484 @@
+"""The camera sensor: render (or read) a frame, detect, and turn detections into bearings.
+
+:class:`CameraSensor` plays the role of :class:`agent.sensors.bearing.GeometricBearingSensor` — the agent calls
+``measure(t, state, truth)`` and gets :class:`~agent.sensors.bearing.Bearing` s — but goes through the image:
+
+1. **capture** at ``t``: the frame the vehicle's camera sees, rendered from the *true* pose and the
+   world truth (:func:`perception.render.render_frame`; targets drawn as red discs or balls, with the
+   configured :class:`~perception.degradation.Degradation`), or the next frame of an external OpenCV
+   source (:class:`VideoSource`: a file, a device, a stream) that replaces the synthetic camera;
+2. **video quality** D(t) of the frame (thesis 000 §2.4, :class:`~perception.quality.VideoQuality`);
+3. **detection**: colour blobs by default (Ross et al., :class:`~perception.blobs.ColorBlobDetector`) or
+   dark blobs (thesis 000 §2.2), optionally through the persistent-object filter; blobs touching the
+   image border are dropped (a cut blob's centroid is biased);
+4. **pose**: the telemetry the sensor gets is a simulated GPS/attitude stream — the true pose
+   delayed by ``gps_latency`` (plus optional attitude noise) — kept in a
+   :class:`~perception.pose_buffer.PoseBuffer`. With ``latency_compensation`` the buffer stores each
+   report ``gps_latency`` earlier (Ross et al., spec 002 §2.5) and the detections of a frame wait until
+   the buffer covers their capture time (delayed pairing, so their bearings come out a few steps later,
+   stamped with the capture time; the tracker's trajectory window takes them there);
+5. **bearing**: each detection's pixel becomes a world ray (:func:`perception.projection.pixel_to_ray_world`
+   with the pose at capture time), i.e. an azimuth/elevation seen from the buffered camera position,
+   with a first-order covariance (below). Each bearing is labelled with the id of the rendered target
+   whose pixel it matches (simulation only: the centralized oracle associates by it; the agent never
+   looks at it).
+
+**Covariance** (first order, chosen here over the UT: one detection costs a few microseconds and the
+bearing function is smooth away from the zenith). Inputs ``x = (u, v, roll, pitch, yaw)`` with standard
+deviations ``(σ_px, σ_px, σ_att, σ_att, σ_att)``; the line of sight is ``ℓ = R_nb(φ, θ, ψ) M r(u, v)``
+(``M`` mount and gimbal, ``r`` the unit camera ray). Its derivatives are exact for the attitude
+(``∂ℓ/∂φ = R_z R_y R_x [e_x]× b``, ``∂ℓ/∂θ = R_z R_y [e_y]× R_x b``, ``∂ℓ/∂ψ = [e_z]× ℓ``, ``b = M r``) and a
+central difference of ``r`` (±0.5 px) for the pixel. Projected on the local azimuth and elevation
+directions, ``d az = e_az·dℓ / cos(el)`` and ``d el = e_el·dℓ`` (``cos(el)`` clamped at 1e-3 as in
+:func:`agent.sensors.bearing.bearing_covariance`), so ``R = J diag(σ²) Jᵀ`` with ``J`` (2×5).
+
+Bad input never crashes the agent: an empty, corrupt or wrong-shape frame, a frame the source could not
+deliver, a capture older than the pose buffer, or a pose that never arrives is counted by reason in
+:attr:`CameraSensor.outcomes` and yields no bearings.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from agent.sensors.bearing import Bearing, BearingSensorConfig, GeometricBearingSensor
+from fusion.measurement import los_to_azel
+from perception.blobs import ColorBlobDetector, DarkBlobDetector
+from perception.camera import Intrinsics
+from perception.degradation import FAILURE_MODES, Degradation
+from perception.persistence import PersistentDetector, PersistentObjectFilter
+from perception.pose import CameraMount, CameraPose, Gimbal
+from perception.pose_buffer import PoseBuffer, PoseSample, PoseTooNew, PoseTooOld
+from perception.quality import VideoQuality
+from perception.render import default_ground, render_frame
+from perception.rotations import rot_x, rot_y, rot_z
+from perception.scene import Target
+from perception.terrain import FlatTerrain
+
+log = logging.getLogger("skymesh.camera")
+
+__all__ = ["CameraSensorConfig", "CameraSensor", "VideoSource", "sensor_from_config", "DETECTORS"]
+
+DETECTORS = ("color", "dark")
+TARGET_SHAPES = ("disc", "sphere")
+PIXEL_STEP = 0.5  # px, central-difference step of the pixel derivative (chosen here)
+POSE_WAIT_MARGIN = 1.0  # s a frame waits for its pose beyond the GPS latency before it is dropped (chosen here)
+LABEL_GATE_PX = 3.0  # px added to 1.5 x the apparent radius when matching a detection to a target (chosen here)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+_EX, _EY, _EZ = (_skew(e) for e in np.eye(3))
+
+
+@dataclass(frozen=True)
+class CameraSensorConfig:
+    """``[sensor] kind = "camera"``. Every default is chosen here unless noted."""
+
+    kind = "camera"  # class attribute (not a field): what sensor_config_from_dict dispatched on
+    width: int = 640  # px
+    height: int = 480  # px
+    hfov: float = math.radians(90.0)  # horizontal field of view [rad] (config: hfov_deg)
+    pan: float = 0.0  # gimbal pan [rad] (config: pan_deg)
+    tilt: float = -math.pi / 2  # gimbal tilt [rad]; -90 deg looks straight down (config: tilt_deg)
+    detector: str = "color"  # "color" (Ross et al. HSV blobs) or "dark" (thesis 000 dark blobs)
+    persistence: bool = False  # run detections through the persistent-object filter (thesis 000 §2.3)
+    edge_margin: float = 2.0  # px: blobs whose box comes this close to the border are dropped
+    noise: float = 2.0  # sensor noise [gray levels] (Degradation.noise_sigma)
+    banding_prob: float = 0.0  # probability of a banding episode per frame (thesis 000 §2.2)
+    speckle_rate: float = 0.0  # mean transient blobs per frame
+    failed: str | None = None  # None, "snow", "black" or "banding": a failed video link
+    gps_latency: float = 0.0  # s by which the telemetry pose the sensor gets is late (Ross: 0.43)
+    latency_compensation: bool = False  # store reports gps_latency earlier and pair frames late (Ross §VI.C)
+    pixel_sigma: float = 1.0  # px: detection noise in the bearing covariance
+    attitude_sigma: float = math.radians(0.5)  # rad: attitude noise in the covariance (config: attitude_sigma_deg)
+    attitude_noise: float = 0.0  # rad: white attitude noise injected into the telemetry (config: attitude_noise_deg)
+    target_radius: float = 1.5  # m: targets are drawn this size (a car-sized disc)
+    target_shape: str = "disc"  # "disc" lying on the ground (its centre is the truth point) or "sphere"
+    target_rgb: tuple[int, int, int] = (200, 20, 20)  # red, for the colour detector
+    ground: str = "terrain"  # procedural ground texture: "terrain" or "tiles"
+    pose_buffer: int = 64  # samples kept in the pose buffer
+
+    def __post_init__(self):
+        if self.detector not in DETECTORS:
+            raise ValueError(f"sensor.detector must be one of {DETECTORS}, got {self.detector!r}")
+        if self.target_shape not in TARGET_SHAPES:
+            raise ValueError(f"sensor.target_shape must be one of {TARGET_SHAPES}, got {self.target_shape!r}")
+        if self.failed is not None and self.failed not in FAILURE_MODES:
+            raise ValueError(f"sensor.failed must be none or one of {FAILURE_MODES}, got {self.failed!r}")
+        if self.ground not in ("terrain", "tiles"):
+            raise ValueError(f"sensor.ground must be terrain or tiles, got {self.ground!r}")
+        for name in ("width", "height", "pose_buffer"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < (8 if name != "pose_buffer" else 2):
+                raise ValueError(f"sensor.{name} must be an integer (>= 8 px, >= 2 samples), got {value!r}")
+        checks = {
+            "hfov": 0 < self.hfov < math.pi, "edge_margin": self.edge_margin >= 0, "noise": self.noise >= 0,
+            "banding_prob": 0 <= self.banding_prob <= 1, "speckle_rate": self.speckle_rate >= 0,
+            "gps_latency": self.gps_latency >= 0, "pixel_sigma": self.pixel_sigma > 0,
+            "attitude_sigma": self.attitude_sigma >= 0, "attitude_noise": self.attitude_noise >= 0,
+            "target_radius": self.target_radius > 0, "pan": True, "tilt": True,
+        }
+        for name, ok in checks.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (ok and math.isfinite(value)):
+                raise ValueError(f"sensor.{name} = {value!r} is out of range")
+        if len(self.target_rgb) != 3 or not all(0 <= int(c) <= 255 for c in self.target_rgb):
+            raise ValueError(f"sensor.target_rgb must be three values in 0..255, got {self.target_rgb!r}")
+        Gimbal(self.pan, self.tilt)  # the gimbal accepts the angles (it clamps to its travel)
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        return Intrinsics.from_fov(self.width, self.height, math.degrees(self.hfov))
+
+    @property
+    def degradation(self) -> Degradation:
+        return Degradation(noise_sigma=self.noise, banding_prob=self.banding_prob, speckle_rate=self.speckle_rate,
+                           failed=self.failed)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> CameraSensorConfig:
+        """From a scenario's ``[sensor]`` table (angles in degrees, named ``*_deg``)."""
+        degrees = {"hfov_deg": "hfov", "pan_deg": "pan", "tilt_deg": "tilt", "attitude_sigma_deg": "attitude_sigma",
+                   "attitude_noise_deg": "attitude_noise"}
+        plain = {"width", "height", "detector", "persistence", "edge_margin", "noise", "banding_prob",
+                 "speckle_rate", "failed", "gps_latency", "latency_compensation", "pixel_sigma", "target_radius",
+                 "target_shape", "target_rgb", "ground", "pose_buffer"}
+        unknown = set(d) - set(degrees) - plain - {"kind"}
+        if unknown:
+            raise ValueError(f"unknown camera sensor settings: {sorted(unknown)}")
+        kwargs = {}
+        for key, value in d.items():
+            if key in degrees:
+                kwargs[degrees[key]] = math.radians(_number(value, key))
+            elif key in ("width", "height", "pose_buffer"):
+                if isinstance(value, bool) or not isinstance(value, int):
+                    raise ValueError(f"sensor.{key} must be an integer, got {value!r}")
+                kwargs[key] = value
+            elif key in ("persistence", "latency_compensation"):
+                if not isinstance(value, bool):
+                    raise ValueError(f"sensor.{key} must be true or false, got {value!r}")
+                kwargs[key] = value
+            elif key == "failed":
+                kwargs[key] = None if value in (None, "none", "") else value
+            elif key == "target_rgb":
+                kwargs[key] = tuple(int(c) for c in value)
+            elif key in ("detector", "target_shape", "ground"):
+                kwargs[key] = value
+            elif key in plain:
+                kwargs[key] = _number(value, key)
+        return cls(**kwargs)
+
+
+def _number(value, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"sensor.{name} must be a number, got {value!r}")
+    return float(value)
+
+
+class VideoSource:
+    """An OpenCV video source (``cv2.VideoCapture``): a file path, a device index (``"0"``) or a stream
+    URL. Opening a source that does not open is a :class:`ValueError`; :meth:`read` returns the next
+    frame as RGB uint8, or ``None`` when no frame could be read or decoded (counted by the sensor)."""
+
+    def __init__(self, source: str | int):
+        self.name = str(source)
+        spec = int(source) if isinstance(source, str) and source.strip().isdigit() else source
+        self.capture = cv2.VideoCapture(spec)
+        if not self.capture.isOpened():
+            self.capture.release()
+            raise ValueError(f"cannot open camera source {self.name!r} (not a readable video file, device or stream)")
+        self.size = (int(self.capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self.capture.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+
+    def read(self) -> np.ndarray | None:
+        try:
+            ok, frame = self.capture.read()
+        except cv2.error:
+            return None
+        if not ok or frame is None:
+            return None
+        if frame.ndim == 3 and frame.shape[2] == 3:
+            return cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
+        return frame
+
+    def close(self) -> None:
+        self.capture.release()
+
+
+@dataclass
+class _Pending:
+    """A captured frame's detections waiting for the pose at their capture time."""
+
+    t: float
+    pixels: np.ndarray  # (n, 2)
+    labels: list  # truth id or None per detection
+
+
+@dataclass
+class CameraStats:
+    frames: int = 0  # frames captured (rendered or read)
+    frames_ok: int = 0  # frames the detector accepted
+    detections: int = 0  # detections kept (after the border rule)
+    bearings: int = 0  # bearings produced
+    visible: int = 0  # (frame, target) pairs with the target visible (synthetic camera only)
+    detected: int = 0  # of those, how many were detected
+    false_detections: int = 0  # detections matching no target (synthetic camera only)
+    outcomes: Counter = field(default_factory=Counter)  # reason -> frames or detections lost
+
+
+class CameraSensor:
+    """The camera pipeline behind the sensor interface ``measure(t, state, truth) -> [Bearing]``.
+
+    ``terrain`` is the world's ground (drawn under the targets); ``source`` an optional
+    :class:`VideoSource` (or anything with ``read()`` and ``close()``) that replaces the renderer."""
+
+    def __init__(self, config: CameraSensorConfig, seed: int, terrain=None, source=None):
+        self.config = config
+        self.rng = np.random.default_rng(seed)
+        self.terrain = terrain if terrain is not None else FlatTerrain()
+        self.source = source
+        self.intrinsics = config.intrinsics
+        if source is not None:
+            size = getattr(source, "size", None)
+            if size and all(size) and tuple(size) != (config.width, config.height):
+                log.info("camera source %s gives %dx%d frames: intrinsics rescaled from %dx%d (same hfov)",
+                         getattr(source, "name", "?"), *size, config.width, config.height)
+                self.intrinsics = Intrinsics.from_fov(int(size[0]), int(size[1]), math.degrees(config.hfov))
+        self.gimbal = Gimbal(config.pan, config.tilt)
+        self.mount = CameraMount()
+        self._M = self.mount.R_body_from_base @ self.gimbal.rotation  # camera -> body
+        self.degradation = config.degradation
+        self.ground = None if source is not None else default_ground(config.ground)
+        expected = (self.intrinsics.height, self.intrinsics.width, 3)
+        base = ColorBlobDetector(expected_shape=expected) if config.detector == "color" else \
+            DarkBlobDetector(expected_shape=expected)
+        self.detector = PersistentDetector(base, PersistentObjectFilter(), report_hidden=False) \
+            if config.persistence else base
+        self.quality = VideoQuality()
+        latency = config.gps_latency
+        # The true poses the simulated telemetry is drawn from (held long enough to look back by the latency).
+        self._truth_poses = PoseBuffer(maxlen=64 + math.ceil(50 * latency), max_extrapolation=0.0)
+        # No extrapolation: a frame waits for the sample after it (delayed pairing) rather than guess.
+        self.poses = PoseBuffer(maxlen=config.pose_buffer, latency=latency if config.latency_compensation else 0.0,
+                                max_extrapolation=0.0)
+        self._pending: list[_Pending] = []
+        self.stats = CameraStats()
+        self.last_quality = None
+
+    # -- the sensor interface ---------------------------------------------------------------------
+    def measure(self, t: float, state, truth: list[dict]) -> list[Bearing]:
+        """Capture a frame at ``t`` from the vehicle ``state`` (a :class:`agent.vehicles.kinematic.VehicleState`),
+        detect, and return the bearings whose pose is known (this frame's, or earlier frames' that waited
+        for a late pose). Never raises on bad frames or poses: they are counted in :attr:`outcomes`."""
+        self._telemetry(t, state)
+        frame, labels = self._capture(t, state, truth)
+        self.stats.frames += 1
+        self.last_quality = self.quality.update(frame)
+        if frame is not None:
+            result = self.detector.detect(frame)
+            if result.error is not None:
+                self.stats.outcomes[f"frame_{result.error}"] += 1
+            else:
+                self.stats.frames_ok += 1
+                pixels = self._kept(result.detections)
+                self.stats.detections += len(pixels)
+                ids = self._label(pixels, labels)
+                if len(pixels):
+                    self._pending.append(_Pending(t, pixels, ids))
+        return self._pair(t)
+
+    @property
+    def outcomes(self) -> Counter:
+        return self.stats.outcomes
+
+    @property
+    def video_quality(self) -> float:
+        """D(t) over the last frames (thesis 000 Eq. 2.4); 0 before the first frame."""
+        return self.quality.D
+
+    def metrics(self) -> dict:
+        s = self.stats
+        return {
+            "kind": "camera", "source": getattr(self.source, "name", "synthetic"), "frames": s.frames,
+            "frames_ok": s.frames_ok, "detections": s.detections, "bearings": s.bearings,
+            "visible_targets": s.visible, "detected_targets": s.detected,
+            "detection_rate": s.detected / s.visible if s.visible else None,
+            "false_detections": s.false_detections,
+            "false_per_frame": s.false_detections / s.frames_ok if s.frames_ok else None,
+            "video_quality": self.video_quality, "video_failed": self.quality.failed,
+            "outcomes": dict(s.outcomes),
+        }
+
+    def close(self) -> None:
+        if self.source is not None:
+            self.source.close()
+
+    # -- steps ------------------------------------------------------------------------------------
+    def _telemetry(self, t: float, state) -> None:
+        """The simulated GPS/attitude report at ``t``: the true pose at ``t - gps_latency``, stamped ``t``."""
+        c = self.config
+        try:
+            self._truth_poses.add(t, state.position, state.roll, state.pitch, state.yaw, c.pan, c.tilt)
+            true = self._truth_poses.at(t - c.gps_latency) if c.gps_latency > 0 else self._truth_poses.at(t)
+        except PoseTooOld:
+            return  # the first gps_latency seconds: no report has arrived yet
+        except ValueError:
+            self.stats.outcomes["bad_vehicle_state"] += 1
+            return
+        roll, pitch, yaw = true.roll, true.pitch, true.yaw
+        if c.attitude_noise > 0:
+            roll, pitch, yaw = np.array([roll, pitch, yaw]) + c.attitude_noise * self.rng.standard_normal(3)
+        self.poses.add(t, true.position, roll, pitch, yaw, true.pan, true.tilt)
+
+    def _capture(self, t: float, state, truth: list[dict]):
+        """The frame at ``t`` and its target labels ``[(truth id, label)]`` (empty for an external source)."""
+        if self.source is not None:
+            frame = self.source.read()
+            if frame is None:
+                self.stats.outcomes["read_failed"] += 1
+            return frame, []
+        try:
+            pose = CameraPose.from_vehicle(state.position, state.roll, state.pitch, state.yaw, self.gimbal, self.mount)
+        except ValueError:  # already counted as bad_vehicle_state by _telemetry
+            return None, []
+        c = self.config
+        targets, ids = [], []
+        for target in truth:
+            position = np.asarray(target["position"], float)
+            if position.shape != (3,) or not np.all(np.isfinite(position)):
+                continue
+            if c.target_shape == "sphere":
+                position = position - np.array([0.0, 0.0, c.target_radius])  # resting on the ground
+            targets.append(Target(tuple(position), c.target_radius, c.target_rgb, shape=c.target_shape))
+            ids.append(target["id"])
+        level = getattr(self.terrain, "level", None)
+        terrain = None if level is not None else self.terrain
+        rendered = render_frame((pose, self.intrinsics), self.intrinsics.width, self.intrinsics.height, targets,
+                                ground=self.ground, ground_height=level or 0.0, terrain=terrain,
+                                degradation=self.degradation, seed=self.rng, thermal=False)
+        return rendered.rgb, list(zip(ids, rendered.targets, strict=True))
+
+    def _kept(self, detections) -> np.ndarray:
+        """Centres of the detections whose box stays clear of the image border."""
+        m, w, h = self.config.edge_margin, self.intrinsics.width, self.intrinsics.height
+        kept = [d.center for d in detections
+                if d.bbox[0] > m and d.bbox[1] > m and d.bbox[0] + d.bbox[2] < w - m and d.bbox[1] + d.bbox[3] < h - m]
+        return np.array(kept, float).reshape(-1, 2)
+
+    def _label(self, pixels: np.ndarray, labels: list) -> list:
+        """Truth id of the rendered target each detection falls on (nearest within its gate), else ``None``;
+        counts visible targets detected and false detections."""
+        if not labels:
+            return [None] * len(pixels)
+        ids = []
+        hit = set()
+        for p in pixels:
+            best, best_d = None, math.inf
+            for k, (_, lab) in enumerate(labels):
+                if not np.isfinite(lab.depth) or not np.all(np.isfinite(lab.center_px)):
+                    continue
+                d = math.hypot(p[0] - lab.center_px[0], p[1] - lab.center_px[1])
+                if d <= 1.5 * lab.radius_px + LABEL_GATE_PX and d < best_d:
+                    best, best_d = k, d
+            if best is None:
+                self.stats.false_detections += 1
+                ids.append(None)
+            else:
+                hit.add(best)
+                ids.append(labels[best][0])
+        visible = [k for k, (_, lab) in enumerate(labels) if lab.visible]
+        self.stats.visible += len(visible)
+        self.stats.detected += sum(k in hit for k in visible)
+        return ids
+
+    def _pair(self, t: float) -> list[Bearing]:
+        """Bearings of every pending frame whose pose is now known; drops the hopeless ones (counted)."""
+        out, waiting = [], []
+        wait_limit = self.config.gps_latency + POSE_WAIT_MARGIN
+        for pending in self._pending:
+            try:
+                pose = self.poses.at(pending.t)
+            except PoseTooOld:
+                self.stats.outcomes["pose_too_old"] += 1
+                continue
+            except PoseTooNew:
+                if t - pending.t > wait_limit:
+                    self.stats.outcomes["pose_timeout"] += 1
+                else:
+                    waiting.append(pending)
+                continue
+            for pixel, truth_id in zip(pending.pixels, pending.labels, strict=True):
+                bearing = self.bearing(pose, pixel, pending.t, truth_id)
+                if bearing is not None:
+                    out.append(bearing)
+        self._pending = waiting
+        self.stats.bearings += len(out)
+        return out
+
+    # -- geometry ---------------------------------------------------------------------------------
+    def bearing(self, pose: PoseSample, pixel, t: float, truth_id=None) -> Bearing | None:
+        """The bearing of ``pixel`` seen with camera pose ``pose`` (see the module docstring for ``R``)."""
+        c = self.config
+        u, v = float(pixel[0]), float(pixel[1])
+        h = PIXEL_STEP
+        pts = np.array([[u, v], [u + h, v], [u - h, v], [u, v + h], [u, v - h]])
+        try:
+            rays = self.intrinsics.ray(pts)
+        except ValueError:
+            self.stats.outcomes["bad_pixel"] += 1
+            return None
+        Rx, Ry, Rz = rot_x(pose.roll), rot_y(pose.pitch), rot_z(pose.yaw)
+        R_nb = Rz @ Ry @ Rx
+        if pose.pan != self.config.pan or pose.tilt != self.config.tilt:
+            M = self.mount.R_body_from_base @ Gimbal(pose.pan, pose.tilt).rotation
+        else:
+            M = self._M
+        b = M @ rays[0]
+        los = R_nb @ b
+        J_los = np.empty((3, 5))
+        J_los[:, 0] = R_nb @ M @ (rays[1] - rays[2]) / (2 * h)
+        J_los[:, 1] = R_nb @ M @ (rays[3] - rays[4]) / (2 * h)
+        J_los[:, 2] = Rz @ Ry @ Rx @ (_EX @ b)
+        J_los[:, 3] = Rz @ Ry @ (_EY @ (Rx @ b))
+        J_los[:, 4] = _EZ @ los
+        azel = los_to_azel(los)
+        az, el = azel
+        cos_el = max(abs(math.cos(el)), 1e-3)
+        e_az = np.array([-math.sin(az), math.cos(az), 0.0])
+        e_el = np.array([-math.sin(el) * math.cos(az), -math.sin(el) * math.sin(az), -math.cos(el)])
+        J = np.vstack([e_az / cos_el, e_el]) @ J_los
+        sig = np.array([c.pixel_sigma, c.pixel_sigma, c.attitude_sigma, c.attitude_sigma, c.attitude_sigma])
+        R = (J * sig**2) @ J.T
+        R = 0.5 * (R + R.T) + 1e-12 * np.eye(2)
+        centre = pose.position + R_nb @ self.mount.offset
+        return Bearing(t, centre, azel, R, truth_id)
+
+
+def sensor_from_config(config, seed: int, terrain=None, source=None):
+    """The agent's sensor for its scenario's ``[sensor]`` config: the camera pipeline for a
+    :class:`CameraSensorConfig` or an external ``source``, else the geometric bearing sensor."""
+    if source is not None and not isinstance(config, CameraSensorConfig):
+        config = CameraSensorConfig()  # an external camera with the default intrinsics and pose
+    if isinstance(config, CameraSensorConfig):
+        return CameraSensor(config, seed, terrain, source)
+    if isinstance(config, BearingSensorConfig):
+        return GeometricBearingSensor(config, seed)
+    raise TypeError(f"unknown sensor config {type(config).__name__}")
+
+
+def sensor_config_from_dict(d: dict):
+    """``[sensor]``: ``kind = "bearing"`` (default, :class:`BearingSensorConfig`) or ``"camera"``."""
+    kind = d.get("kind", "bearing")
+    if kind == "camera":
+        return CameraSensorConfig.from_dict(d)
+    if kind == "bearing":
+        return BearingSensorConfig.from_dict(d)
+    raise ValueError(f"sensor.kind must be bearing or camera, got {kind!r}")

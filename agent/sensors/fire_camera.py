@@ -1,0 +1,85 @@
+"""The fire camera: a down-looking thermal camera whose frames become per-cell grid evidence.
+
+Each step: render the thermal frame the vehicle's camera sees of the true fire (the burning cells the
+world publishes, :mod:`agent.net.fire_truth`; plus transient hot spots, the *decoys*, that flicker into
+single frames the way sun glints and hot rocks do), segment it by a temperature threshold (the IR
+segmentation of Merino App. B; a threshold stands in for the thesis's ANFIS), and turn the binary mask
+into per-cell likelihoods with the pose the telemetry reports (the true pose plus white pose noise of
+the size the likelihood model assumes): Merino (4.9)-(4.15) and the Beta pseudo-counts (4.31),
+through :func:`perception.grid_likelihood.camera_cell_evidence`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from perception.camera import Intrinsics
+from perception.grid_likelihood import CellEvidence, DetectionModel, PoseNoise, camera_cell_evidence
+from perception.pose import CameraPose, Gimbal
+from perception.render import render_frame
+from perception.scene import Fire
+
+DECOY_SIZE_M = 5.0  # a hot spot the size of a cell: a hot vehicle, a sun glint on a roof (chosen here)
+
+
+@dataclass(frozen=True)
+class FireCameraConfig:
+    width: int = 160  # px: a small radiometric thermal core (chosen here)
+    height: int = 120  # px
+    hfov: float = math.radians(60.0)  # rad (config: hfov_deg); chosen here
+    threshold_K: float = 400.0  # segmentation threshold (chosen here: ambient ~290 K, flames 800 K)
+    decoy_K: float = 650.0  # temperature of a decoy in the frames where it shows (chosen here)
+
+    def __post_init__(self):
+        if not (isinstance(self.width, int) and isinstance(self.height, int) and self.width >= 8 and self.height >= 8):
+            raise ValueError(f"fire camera size must be integers >= 8 px, got {self.width}x{self.height}")
+        if not (0.0 < self.hfov < math.pi):
+            raise ValueError(f"fire camera hfov must be in (0, 180) degrees, got {math.degrees(self.hfov)}")
+        if not (np.isfinite(self.threshold_K) and self.threshold_K > 0):
+            raise ValueError(f"fire camera threshold_K must be positive, got {self.threshold_K}")
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        return Intrinsics.from_fov(self.width, self.height, math.degrees(self.hfov))
+
+
+class FireCamera:
+    """Render, segment, and turn into cell evidence; ``rng`` drives the pose noise and the decoys."""
+
+    def __init__(self, config: FireCameraConfig, model: DetectionModel, noise: PoseNoise, seed: int):
+        self.config = config
+        self.model = model
+        self.noise = noise
+        self.intrinsics = config.intrinsics
+        self.gimbal = Gimbal(0.0, -math.pi / 2)
+        self.rng = np.random.default_rng(seed)
+        self.frames = 0
+        self.fire_pixels = 0
+
+    def evidence(self, state, fires: list[Fire], decoys: list[tuple[float, float, float]], cells_ned: np.ndarray,
+                 cell: float, terrain=None) -> CellEvidence:
+        """Cell evidence of the frame seen from vehicle ``state``; ``decoys`` are (north, east, probability
+        of showing in a frame) of hot spots ``DECOY_SIZE_M`` across."""
+        true_pose = CameraPose.from_vehicle(state.position, state.roll, state.pitch, state.yaw, self.gimbal)
+        shown = [Fire((n, e), DECOY_SIZE_M, self.config.decoy_K) for n, e, p in decoys if self.rng.random() < p]
+        level = getattr(terrain, "level", None)
+        frame = render_frame((true_pose, self.intrinsics), self.intrinsics.width, self.intrinsics.height,
+                             fires=[*fires, *shown], ground_height=level or 0.0,
+                             terrain=None if level is not None or terrain is None else terrain,
+                             seed=self.rng, rgb=False, thermal=True)
+        mask = frame.thermal > self.config.threshold_K
+        self.frames += 1
+        self.fire_pixels += int(mask.sum())
+        return camera_cell_evidence(mask, cells_ned, cell, self._reported_pose(state), self.intrinsics,
+                                    self.model, self.noise)
+
+    def _reported_pose(self, state) -> CameraPose:
+        """The pose the telemetry reports: the truth plus the noise the likelihood model accounts for."""
+        n = self.noise
+        position = np.asarray(state.position, float) + n.position_sigma * self.rng.standard_normal(3)
+        attitude = np.array([state.roll, state.pitch, state.yaw]) + n.attitude_sigma * self.rng.standard_normal(3)
+        roll, pitch, yaw = (float(a) for a in attitude)
+        return CameraPose.from_vehicle(position, roll, pitch, yaw, self.gimbal)

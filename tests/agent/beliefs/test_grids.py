@@ -1,0 +1,150 @@
+"""The agent's fire map over the exchange protocol: exact on a tree, conservative on loops, safe on bad input.
+
+The mappers exchange real grid messages (codec payloads, acknowledgements, channel filters); only the
+camera is bypassed: each node's local evidence is random per-cell log-likelihood ratios, and the
+centralized map is their plain sum (Merino (4.4)).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent.beliefs.grid_config import GridConfig
+from agent.beliefs.grids import FireMapper
+from agent.net import wire
+from perception.terrain import FlatTerrain
+
+AREA = (-50.0, 50.0, -50.0, 50.0)
+
+
+class Node:
+    def __init__(self, name: str, config: GridConfig):
+        self.name = name
+        self.mapper = FireMapper(name, config, AREA, FlatTerrain(), seed=1)
+        self.seq = 0
+
+    def observe(self, rng, central, positive: bool = False):
+        """Local evidence in a patch of cells; adds it to the centralized map too."""
+        index = rng.choice(self.mapper.geometry.size, size=40, replace=False)
+        llr = rng.uniform(0.1, 1.0, size=40) if positive else rng.normal(0.0, 1.0, size=40)
+        if self.mapper.config.belief == "logodds":
+            self.mapper.grid = self.mapper.grid.update_cells(index, llr)
+            return central.update_cells(index, llr)
+        m, n = np.abs(llr), np.abs(llr[::-1])
+        self.mapper.grid = self.mapper.grid.update_cells(index, m, n)
+        return central.update_cells(index, m, n)
+
+    def send(self, neighbours: list[str]) -> tuple[int, dict]:
+        payload, quantized = self.mapper.outgoing(neighbours)
+        self.seq += 1
+        self.mapper.sent(self.seq, payload, quantized)
+        return self.seq, payload
+
+
+def _exchange(nodes: dict, edges, rounds: int, rng, central, tree: bool, positive=False, observe_rounds=None):
+    neighbours = {n: sorted({b for a, b in edges if a == n} | {a for a, b in edges if b == n}) for n in nodes}
+    observe_rounds = rounds if observe_rounds is None else observe_rounds
+    for r in range(rounds):
+        if r < observe_rounds:
+            for node in nodes.values():
+                central = node.observe(rng, central, positive)
+        for name, node in nodes.items():
+            seq, payload = node.send(neighbours[name])
+            for peer in neighbours[name]:
+                nodes[peer].mapper.receive(name, seq, payload, tree_edge=tree)
+    return central
+
+
+@pytest.mark.parametrize("belief", ["logodds", "beta"])
+def test_on_a_tree_every_map_equals_the_centralized_map(belief):
+    rng = np.random.default_rng(2)
+    config = GridConfig(belief=belief, policy="hybrid", cell=10.0)
+    nodes = {n: Node(n, config) for n in "abcd"}
+    central = nodes["a"].mapper.beliefs.uniform()
+    edges = [("a", "b"), ("b", "c"), ("b", "d")]
+    central = _exchange(nodes, edges, 12, rng, central, tree=True, observe_rounds=8)
+    for node in nodes.values():
+        assert node.mapper.fusions == {"exact": node.mapper.fusions["exact"]}
+        diff = node.mapper.beliefs.to_layers(node.mapper.grid) - node.mapper.beliefs.to_layers(central)
+        assert np.max(np.abs(diff)) < 1e-5  # float32 on the wire; the algebra itself is exact
+
+
+def test_on_a_loop_the_chernoff_rule_never_exceeds_the_centralized_confidence_while_naive_does():
+    edges = [("a", "b"), ("b", "c"), ("c", "a")]
+    peaks = {}
+    for policy in ("hybrid", "naive"):
+        rng = np.random.default_rng(5)
+        config = GridConfig(policy=policy, cell=10.0)
+        nodes = {n: Node(n, config) for n in "abc"}
+        central = _exchange(nodes, edges, 10, rng, nodes["a"].mapper.beliefs.uniform(), tree=False, positive=True)
+        excess = max(np.max(node.mapper.grid.evidence - central.evidence) for node in nodes.values())
+        peaks[policy] = excess
+    assert peaks["hybrid"] <= 1e-5
+    assert peaks["naive"] > 1.0  # rumours: the same evidence counted again and again
+
+
+def _message(belief="logodds", **changes):
+    node = Node("a", GridConfig(belief=belief, cell=10.0))
+    node.observe(np.random.default_rng(0), node.mapper.beliefs.uniform())
+    seq, payload = node.send([])
+    return seq, {**payload, **changes}
+
+
+@pytest.mark.parametrize("bad, reason", [
+    ({"belief": "beta"}, "grid_geometry"),  # a Beta grid sent to a log-odds agent
+    ({"geometry": {"origin": [0.0, 0.0], "cell": 7.0, "shape": [3, 3], "height": 0.0}}, "grid_geometry"),
+    ({"geometry": "not a geometry"}, "grid_geometry"),
+    ({"acks": {"b": -1}}, "bad_field"),  # a negative acknowledgement
+    ({"grid": {"mode": "key", "layers": b"\x00\x01"}}, None),  # garbage codec payload
+])
+def test_bad_grid_messages_are_rejected_and_change_nothing(bad, reason):
+    receiver = Node("b", GridConfig(cell=10.0))
+    before = receiver.mapper.grid.evidence.copy()
+    seq, payload = _message(**bad)
+    with pytest.raises(wire.DecodeError) as err:
+        receiver.mapper.receive("a", seq, payload, tree_edge=True)
+    if reason is not None:
+        assert err.value.reason == reason
+    assert err.value.reason in wire.REASONS
+    np.testing.assert_array_equal(receiver.mapper.grid.evidence, before)
+    assert not receiver.mapper.fusions
+
+
+def test_negative_beta_counts_on_the_wire_are_rejected():
+    """A Beta grid whose keyframe carries a negative count."""
+    from agent.net.grid_codec import encode_grid
+
+    receiver = Node("b", GridConfig(belief="beta", cell=10.0))
+    seq, payload = _message(belief="beta")
+    layers = np.zeros((2, *receiver.mapper.geometry.shape))
+    layers[0, 0, 0] = -3.0
+    payload["grid"] = encode_grid(layers, None, None)
+    with pytest.raises(wire.DecodeError) as err:
+        receiver.mapper.receive("a", seq, payload, tree_edge=True)
+    assert err.value.reason == "grid_bad_values"
+
+
+def test_the_explorer_plans_on_a_predicted_spread_but_the_shared_map_stays_static():
+    """An explored map (p = 0.01) with one fire cell and one unexplored cell (p = 0.5)."""
+    node = Node("a", GridConfig(cell=10.0, plan_spread=0.2, plan_steps=3))
+    shape = node.mapper.geometry.shape
+    llr = np.full(shape, np.log(0.01 / 0.99))
+    llr[5, 5], llr[1, 1] = 8.0, 0.0  # the fire, and a cell nobody has seen
+    node.mapper.grid = node.mapper.grid.update(llr)
+    before = node.mapper.grid.evidence.copy()
+    planned, shared = node.mapper.planning_probability(), node.mapper.probability()
+    assert planned[5, 6] > shared[5, 6] + 0.3  # a neighbour of the fire may be burning by now
+    assert planned[5, 1] == pytest.approx(shared[5, 1], abs=1e-12)  # far from the fire: no change
+    assert planned[1, 1] == pytest.approx(0.5) and planned[1, 2] == pytest.approx(0.01)  # unexplored is no fire
+    np.testing.assert_array_equal(node.mapper.grid.evidence, before)
+    off = Node("b", GridConfig(cell=10.0))
+    np.testing.assert_array_equal(off.mapper.planning_probability(), off.mapper.probability())
+
+
+@pytest.mark.parametrize("bad", [{"belief": "gaussian"}, {"policy": "bogus"}, {"cell": -1.0}, {"alarm_threshold": 1.5},
+                                 {"keyframe_every": 0}, {"intersect": "min"}, {"colour": "red"}, {"pd": 0.01},
+                                 {"plan_spread": 1.5}, {"plan_steps": 0}])
+def test_bad_grid_settings_are_clear_errors(bad):
+    with pytest.raises(ValueError):
+        GridConfig.from_dict(bad)
