@@ -9,10 +9,14 @@
   replaces that agent's synthetic camera with an OpenCV video source (file, device index, stream URL);
   a source that cannot be opened is a usage error before anything starts;
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
-* ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``).
+* ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``);
+* ``skymesh compare BEFORE AFTER [--plain] [--limit N]`` — compare two run folders exactly, volatile fields
+  (pids, CPU and wall times, ...) aside (``mesh_sim.run_compare``): exit 0 identical, 1 different;
+* ``skymesh compare --tree BEFORE_ROOT AFTER_ROOT [--details]`` — pair the run folders of two roots by
+  name, one line per pair.
 
-Exit codes: 0 success, 1 a run that failed (a child died), 2 usage error (unknown benchmark or
-scenario, bad settings), 130 interrupted.
+Exit codes: 0 success, 1 a run that failed (a child died) or runs that differ, 2 usage error (unknown
+benchmark or scenario, bad settings, not a run folder), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -83,6 +87,19 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--save", help="write the recording to this .rrd file")
     view.add_argument("--connect-viewer", help="stream to a Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
     view.add_argument("--duration", type=float, help="stop after this many seconds")
+
+    compare = commands.add_parser(
+        "compare", help="compare two run folders exactly (volatile fields aside)",
+        description="Compare metrics.json, agent-*.json, oracle.json and fire_maps.npz of two run folders exactly, "
+                    "ignoring volatile fields (pids, CPU and wall times, memory, speed factor, run and fleet names). "
+                    "Exit 0 identical, 1 different, 2 usage error.")
+    compare.add_argument("before", type=Path, help="a run folder, or a folder holding exactly one")
+    compare.add_argument("after", type=Path, help="a run folder, or a folder holding exactly one")
+    compare.add_argument("--tree", action="store_true",
+                         help="BEFORE and AFTER are roots whose sub-folders are paired by name: one line per pair")
+    compare.add_argument("--details", action="store_true", help="with --tree: also list each pair's differences")
+    compare.add_argument("--plain", action="store_true", help="plain lines instead of a table")
+    compare.add_argument("--limit", type=_positive_int, default=50, help="list at most N differences (default 50)")
     return parser
 
 
@@ -192,6 +209,38 @@ def _view(args) -> int:
     return observer_main(argv)
 
 
+def _compare(args) -> int:
+    from mesh_sim.run_compare import RunFolderError, compare, compare_tree, difference_lines, difference_table
+
+    try:
+        found = compare_tree(args.before, args.after) if args.tree else compare(args.before, args.after)
+    except (RunFolderError, OSError, ValueError) as err:
+        print(f"skymesh compare: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    console = make_console()
+
+    def show(differences, title: str, indent: str = "") -> None:
+        if args.plain:
+            for line in difference_lines(differences, args.limit):
+                print(indent + line)
+        else:
+            console.print(difference_table(differences, title, args.limit))
+
+    if not args.tree:
+        if not found:
+            print(f"identical: {args.before} and {args.after} (volatile fields aside)")
+            return 0
+        show(found, f"{len(found)} difference(s): {args.before} -> {args.after}")
+        return 1
+    for pair in found:
+        print(pair.summary())
+        if args.details and pair.differences:
+            show(pair.differences, pair.name, indent="  ")
+    same = sum(pair.identical for pair in found)
+    print(f"{same} of {len(found)} pairs identical")
+    return 0 if same == len(found) else 1
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``skymesh`` console script; returns the exit code."""
     args = build_parser().parse_args(argv)
@@ -199,6 +248,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _bench(args)
     if args.command == "view":
         return _view(args)
+    if args.command == "compare":
+        return _compare(args)
     if args.command == "stress":
         args.name, args.list = "stress", False
         return _bench(args)

@@ -8,6 +8,8 @@ import pytest
 
 from mesh_sim.bench import common, fire
 
+pytestmark = pytest.mark.slow  # benchmark runs
+
 
 @pytest.fixture(scope="module")
 def result():

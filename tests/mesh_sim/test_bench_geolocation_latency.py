@@ -10,6 +10,8 @@ from rich.console import Console
 from mesh_sim.bench import common
 from mesh_sim.bench import geolocation_latency as bench
 
+pytestmark = pytest.mark.slow  # benchmark runs
+
 
 @pytest.fixture(scope="module")
 def result():

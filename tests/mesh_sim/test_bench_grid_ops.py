@@ -11,6 +11,8 @@ import pytest
 from mesh_sim.bench import BENCHMARKS, common
 from mesh_sim.bench import grid_ops as bench
 
+pytestmark = pytest.mark.slow  # benchmark runs
+
 KINDS = {"keyframe", "keyframe, all prior", "delta 1 %", "delta 10 %", "delta, no change"}
 
 

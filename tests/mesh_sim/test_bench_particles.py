@@ -10,6 +10,8 @@ import pytest
 
 from mesh_sim.bench import BENCHMARKS, common, particles
 
+pytestmark = pytest.mark.slow  # benchmark runs
+
 
 def _positive(value) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value) and value > 0

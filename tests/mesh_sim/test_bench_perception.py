@@ -11,6 +11,8 @@ from rich.console import Console
 
 from mesh_sim.bench import common, coop_vs_single, perception
 
+pytestmark = pytest.mark.slow  # benchmark runs
+
 
 def _positive(value) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value) and value > 0

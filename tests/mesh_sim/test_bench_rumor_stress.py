@@ -9,9 +9,13 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from mesh_sim.bench import rumor, stress
 from mesh_sim.radio import compile_plan
 from tests.processes import assert_no_children_left
+
+pytestmark = pytest.mark.slow  # benchmark runs
 
 
 def test_anees_interval_and_independent_samples():

@@ -15,6 +15,8 @@ import pytest
 from mesh_sim.bench import common, scale, transport
 from tests.processes import assert_no_children_left
 
+pytestmark = pytest.mark.slow  # benchmark runs
+
 
 def _positive(value) -> bool:
     return isinstance(value, int | float) and math.isfinite(value) and value > 0

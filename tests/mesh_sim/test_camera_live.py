@@ -16,6 +16,8 @@ from perception.render import render_frame
 from perception.scene import Target
 from tests.processes import assert_all_gone
 
+pytestmark = pytest.mark.slow  # live multi-process runs: launcher, agent processes, Zenoh router
+
 VIDEO_FRAMES = 20
 DURATION = 15.0
 

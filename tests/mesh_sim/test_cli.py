@@ -19,6 +19,7 @@ def _skymesh(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow  # a benchmark run in a subprocess
 def test_bench_fusion_ops_quick_writes_complete_json(tmp_path):
     path = tmp_path / "out" / "fusion-ops.json"
     proc = _skymesh("bench", "fusion-ops", "--quick", "--json", str(path), "--repeats", "2")

@@ -31,6 +31,7 @@ def completed_run(tmp_path_factory):
     return outcome
 
 
+@pytest.mark.slow
 def test_live_run_completes_and_every_agent_tracks_every_target(completed_run):
     metrics = completed_run.metrics
     assert completed_run.status == "completed", completed_run.status
@@ -45,6 +46,7 @@ def test_live_run_completes_and_every_agent_tracks_every_target(completed_run):
     assert metrics["fleet"]["rmse_ratio_to_oracle"] < 3.0
 
 
+@pytest.mark.slow
 def test_live_run_bytes_flow_between_every_pair(completed_run):
     agents = completed_run.metrics["agents"]
     names = {a["id"] for a in agents}
@@ -55,6 +57,7 @@ def test_live_run_bytes_flow_between_every_pair(completed_run):
             assert heard[peer].get("telemetry", 0) > 0
 
 
+@pytest.mark.slow
 def test_live_run_writes_the_run_folder(completed_run):
     run_dir = completed_run.run_dir
     on_disk = json.loads((run_dir / "metrics.json").read_text())
@@ -67,10 +70,12 @@ def test_live_run_writes_the_run_folder(completed_run):
         assert key in on_disk["fleet"]
 
 
+@pytest.mark.slow
 def test_live_run_leaves_no_process(completed_run):
     assert_all_gone(completed_run.pids.values())
 
 
+@pytest.mark.slow
 def test_killing_an_agent_stops_the_whole_run(tmp_path):
     """Bad event: an agent dies (SIGKILL) mid-run. The launcher must notice, stop everything, and still
     write the metrics it has."""
@@ -98,6 +103,7 @@ def test_killing_an_agent_stops_the_whole_run(tmp_path):
     assert (outcome.run_dir / "metrics.json").exists()
 
 
+@pytest.mark.slow
 def test_children_exit_when_the_launcher_is_killed(tmp_path):
     """Bad event: the launcher itself is SIGKILLed. Its children must not become orphans."""
     cmd = [sys.executable, "-m", "mesh_sim.cli", "run", "--agents", "3", "--duration", "60", "--rerun", "off",

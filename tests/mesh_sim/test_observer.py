@@ -238,6 +238,7 @@ def _wait_for_subscriber(session, key: str, timeout: float = 15.0):
     return pub
 
 
+@pytest.mark.slow
 def test_observer_process_over_zenoh_stops_on_sigterm(router, tmp_path):
     fleet = f"t{uuid.uuid4().hex[:12]}"
     keys = Keys(fleet)
@@ -275,6 +276,7 @@ def test_observer_process_over_zenoh_stops_on_sigterm(router, tmp_path):
     assert rows["/world/uav/uav0"] >= 5
 
 
+@pytest.mark.slow
 def test_observer_process_exits_when_its_parent_dies(router, tmp_path):
     fleet = f"t{uuid.uuid4().hex[:12]}"
     rrd = tmp_path / "orphan.rrd"
@@ -306,6 +308,7 @@ def test_observer_process_exits_when_its_parent_dies(router, tmp_path):
     assert rows.get("/world", 0) == 1
 
 
+@pytest.mark.slow
 def test_observer_process_without_a_router_fails_cleanly(tmp_path):
     cmd = _observer_cmd(f"t{uuid.uuid4().hex[:12]}", f"tcp/127.0.0.1:{_free_port()}", tmp_path / "x.rrd", 5.0)
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=30, check=False)

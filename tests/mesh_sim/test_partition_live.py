@@ -139,6 +139,7 @@ def live_run(tmp_path_factory):
     return scenario, outcome
 
 
+@pytest.mark.slow
 def test_live_partition_and_merge(live_run):
     scenario, outcome = live_run
     assert outcome.status == "completed", outcome.status
@@ -146,6 +147,7 @@ def test_live_partition_and_merge(live_run):
     check_partition_run(outcome.metrics, scenario)
 
 
+@pytest.mark.slow
 def test_live_partition_leaves_no_process(live_run):
     _, outcome = live_run
     assert set(outcome.pids) == {"world", "uav0", "uav1", "uav2", "uav3"}
