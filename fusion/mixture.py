@@ -41,7 +41,8 @@ from scipy.linalg import solve_triangular
 from scipy.spatial.distance import cdist
 from scipy.special import logsumexp
 
-from fusion.particles import WEIGHT_SUM_TOL, ParticleSet, optimal_bandwidth
+from fusion.particles import WEIGHT_SUM_TOL, ParticleSet
+from fusion.resampling import optimal_bandwidth
 
 #: Largest number of (point, component) pairs evaluated at once by :meth:`GaussianMixture.logpdf`
 #: (chosen here: ~16 MB of float64 per chunk).

@@ -196,7 +196,7 @@ def fuse_bayes(
     ``bandwidth``/``shrink`` configure the density estimates (default (5.24), unshrunk as in the thesis);
     ``n`` particles (default ``local.n``) are resampled from the pool, or with ``resample=False`` the
     weighted pool of ``N_i + N_j`` particles is returned. Raises ``ValueError`` on mismatched dimensions,
-    and :class:`~fusion.particles.DegenerateWeightsError` when every pooled weight is zero."""
+    and :class:`~fusion.resampling.DegenerateWeightsError` when every pooled weight is zero."""
     return fuse_bayes_detailed(
         local, received, common, rng, n=n, bandwidth=bandwidth, shrink=shrink, resample=resample
     ).fused

@@ -11,10 +11,9 @@ Operations (every one returns a new, immutable :class:`ParticleSet`):
   Monte Carlo estimate of ``p(z_t | z^{t-1})`` used by the transmission trigger (5.35).
 * **effective sample size** ``N_eff = [Σ_k (w̃^(k))²]^-1`` (§5.1; the thesis's "variance of the weights
   below a threshold" is read as "N_eff below a threshold", spec 001b §6 item 1).
-* **low-variance (systematic) resampling** (Thrun et al. 2005, suggested in §5.1): one uniform draw
-  ``u ~ U[0, 1/N)`` and the points ``u + k/N``; particle ``k`` is copied ``floor(N w̃_k)`` or
-  ``ceil(N w̃_k)`` times.
-* **jitter** after resampling (5.32): ``p_t^(k) = p_{t-1}^(k) + ν_t``, ``ν_t ~ N(0, R_t)``.
+* **low-variance (systematic) resampling** (Thrun et al. 2005, suggested in §5.1) and **jitter** after
+  resampling (5.32), ``p_t^(k) = p_{t-1}^(k) + ν_t``, ``ν_t ~ N(0, R_t)``: the kernels are in
+  :mod:`fusion.resampling`.
 * **moments** ``μ = Σ w̃ x``, ``Σ̂ = Σ w̃ (x - μ)(x - μ)ᵀ`` and the moment-matched :class:`Gaussian`
   (the hand-over to the information filter that §5.5/§9 suggest once the belief is Gaussian).
 
@@ -24,7 +23,8 @@ the kernel of the density estimate (5.25), ``N(0, h² Σ̂)`` with the bandwidth
 regularised particle filter of Musso et al. (2001), whom the thesis cites for (5.19) — and the resampled
 particles are first shrunk towards the mean by ``a = sqrt(1 - h²)`` (Liu & West 2001), so that jittering
 keeps the weighted mean and covariance instead of inflating the covariance by ``1 + h²`` at every
-resampling of a static state. A fixed ``R_t`` can be configured instead.
+resampling of a static state (:func:`fusion.resampling.kernel_jitter`). A fixed ``R_t`` can be configured
+instead.
 
 Transmission trigger (5.35): ``p(z^{t-k:t} | z^{t-k}) = Π_τ p(z_τ | z^{τ-1})``; a node transmits when the
 product falls below a threshold (the data since the last transmission were informative), accumulated
@@ -43,6 +43,15 @@ import numpy as np
 
 from fusion import validation
 from fusion.gaussian import Gaussian
+from fusion.resampling import (
+    DegenerateWeightsError,
+    as_raw_weights,
+    gaussian_noise,
+    kernel_jitter,
+    optimal_bandwidth,
+    positive_count,
+    systematic_indices,
+)
 
 #: Merino §5.3.3: resample when the effective sample size drops below 30 % of N.
 RESAMPLE_THRESHOLD = 0.3
@@ -66,10 +75,6 @@ FLAT_AXIS_RTOL = 1e-12
 DEFAULT_LOG_THRESHOLD = math.log(0.1)
 
 
-class DegenerateWeightsError(ValueError):
-    """Every weight is zero (all particles have zero likelihood): the set cannot be normalised."""
-
-
 # -- validation --------------------------------------------------------------------------------------
 def _as_states(states) -> np.ndarray:
     arr = np.array(states, dtype=float)  # a copy: the set owns its arrays
@@ -84,19 +89,8 @@ def _as_states(states) -> np.ndarray:
     return arr
 
 
-def _as_raw_weights(weights, n: int, name: str = "weights") -> np.ndarray:
-    arr = np.array(weights, dtype=float)
-    if arr.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},) to match the states, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contain non-finite values (NaN or inf)")
-    if np.any(arr < 0.0):
-        raise ValueError(f"{name} must be non-negative, got minimum {arr.min():.3g}")
-    return arr
-
-
 def _as_normalised_weights(weights, n: int) -> np.ndarray:
-    arr = _as_raw_weights(weights, n)
+    arr = as_raw_weights(weights, n)
     total = float(arr.sum())
     if total == 0.0:
         raise DegenerateWeightsError("weights are all zero")
@@ -105,54 +99,9 @@ def _as_normalised_weights(weights, n: int) -> np.ndarray:
     return arr  # kept bit for bit (dividing by a sum of 1 ± ulp again would change them at every copy)
 
 
-def _count(n, name: str) -> int:
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
-        raise ValueError(f"{name} must be a positive integer, got {n!r}")
-    return int(n)
-
-
 def _readonly(arr: np.ndarray) -> np.ndarray:
     arr.setflags(write=False)
     return arr
-
-
-# -- the bandwidth of the density estimate ------------------------------------------------------------
-def optimal_bandwidth(n: float, dim: int) -> float:
-    """``h_opt = (4 / (d + 2))^{1/(d+4)} N^{-1/(d+4)}`` (Merino (5.24), Silverman's rule for a Gaussian
-    kernel). ``n`` may be fractional (an effective sample size)."""
-    if isinstance(dim, bool) or not isinstance(dim, int | np.integer) or dim < 1:
-        raise ValueError(f"dimension must be a positive integer, got {dim!r}")
-    n = float(n)
-    if not math.isfinite(n) or n < 1.0:
-        raise ValueError(f"the number of particles for the bandwidth must be >= 1, got {n!r}")
-    return (4.0 / (dim + 2)) ** (1.0 / (dim + 4)) * n ** (-1.0 / (dim + 4))
-
-
-def systematic_indices(weights, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Indices drawn by low-variance (systematic) resampling: ``u ~ U[0, 1)``, points ``(u + k) / n``
-    against the cumulative weights. Index ``k`` appears ``floor(n w_k)`` or ``ceil(n w_k)`` times;
-    zero-weight entries never appear."""
-    n = _count(n, "number of resampled particles")
-    if np.ndim(weights) != 1 or np.shape(weights)[0] == 0:
-        raise ValueError(f"weights must be a non-empty vector, got shape {np.shape(weights)}")
-    w = _as_raw_weights(weights, np.shape(weights)[0])
-    cumulative = np.cumsum(w)
-    if cumulative[-1] <= 0.0:
-        raise DegenerateWeightsError("weights are all zero")
-    cumulative /= cumulative[-1]
-    cumulative[-1] = 1.0  # the points are < 1, so every one finds a particle
-    points = (rng.random() + np.arange(n)) / n
-    return np.searchsorted(cumulative, points, side="right")
-
-
-def _gaussian_noise(rng: np.random.Generator, cov: np.ndarray, size: int) -> np.ndarray:
-    """``size`` draws of ``N(0, cov)`` for a PSD ``cov`` (Cholesky, or the symmetric root if singular)."""
-    try:
-        root = np.linalg.cholesky(cov)
-    except np.linalg.LinAlgError:
-        vals, vecs = np.linalg.eigh(cov)
-        root = vecs * np.sqrt(np.clip(vals, 0.0, None))
-    return rng.standard_normal((size, cov.shape[0])) @ root.T
 
 
 # -- the particle set ---------------------------------------------------------------------------------
@@ -187,7 +136,7 @@ class ParticleSet:
     def from_unnormalised(cls, states, weights) -> ParticleSet:
         """From non-negative weights of any positive total (normalised here, Merino (5.6))."""
         states = _as_states(states)
-        w = _as_raw_weights(weights, states.shape[0])
+        w = as_raw_weights(weights, states.shape[0])
         total = float(w.sum())
         if total == 0.0:
             raise DegenerateWeightsError("weights are all zero")
@@ -242,14 +191,14 @@ class ParticleSet:
 
     def resampled(self, rng: np.random.Generator, n: int | None = None) -> ParticleSet:
         """Low-variance (systematic) resampling to ``n`` (default ``N``) equally weighted particles."""
-        n = self.n if n is None else _count(n, "number of resampled particles")
+        n = self.n if n is None else positive_count(n, "number of resampled particles")
         idx = systematic_indices(self.weights, n, rng)
         return ParticleSet(self.states[idx], np.full(n, 1.0 / n))
 
     def jittered(self, rng: np.random.Generator, cov) -> ParticleSet:
         """Every state plus independent ``N(0, cov)`` noise (Merino (5.32)); ``cov`` is d x d PSD."""
         cov = validation.as_psd(cov, "jitter covariance", self.dim)
-        return ParticleSet(self.states + _gaussian_noise(rng, cov, self.n), self.weights)
+        return ParticleSet(self.states + gaussian_noise(rng, cov, self.n), self.weights)
 
     def kernel_jittered(
         self, rng: np.random.Generator, bandwidth: float | None = None, shrink: bool = True
@@ -260,15 +209,7 @@ class ParticleSet:
         2001): the weighted mean and covariance are then unchanged in expectation (``a² Σ̂ + h² Σ̂ = Σ̂``).
         ``h`` is capped at 1 (``a = 0``: a fresh Gaussian sample) when ``N_eff`` is tiny."""
         h = optimal_bandwidth(self.n_eff(), self.dim) if bandwidth is None else _bandwidth(bandwidth)
-        return self._kernel_jitter(rng, h, shrink, self.mean(), self.cov())
-
-    def _kernel_jitter(self, rng, h: float, shrink: bool, mu: np.ndarray, cov: np.ndarray) -> ParticleSet:
-        states = self.states
-        if shrink:
-            h = min(h, 1.0)
-            a = math.sqrt(1.0 - h * h)
-            states = a * states + (1.0 - a) * mu
-        return ParticleSet(states + _gaussian_noise(rng, h * h * cov, self.n), self.weights)
+        return ParticleSet(kernel_jitter(self.states, rng, h, shrink, self.mean(), self.cov()), self.weights)
 
     # -- Gaussian hand-over -----------------------------------------------------------------------
     def to_gaussian(self) -> Gaussian:
@@ -404,7 +345,8 @@ def sir_update(
             # estimate: resampling only adds noise to them)
             h = optimal_bandwidth(n_eff, updated.dim)
             mu, cov = updated.mean(), updated.cov()
-            updated = updated.resampled(rng)._kernel_jitter(rng, h, config.shrink, mu, cov)
+            resampled = updated.resampled(rng)
+            updated = ParticleSet(kernel_jitter(resampled.states, rng, h, config.shrink, mu, cov), resampled.weights)
         else:
             if config.jitter_cov.shape != (updated.dim, updated.dim):
                 raise ValueError(

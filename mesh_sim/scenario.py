@@ -13,7 +13,7 @@ from agent.config import AgentScenario, read_scenario_file
 from agent.net.fire_truth import decoy
 from mesh_sim.fire import FireConfig
 from mesh_sim.radio import compile_plan
-from mesh_sim.targets import targets_from_config
+from mesh_sim.target_set import targets_from_config
 from perception.terrain import terrain_from_config
 
 SCENARIO_DIR = Path(__file__).with_name("scenarios")

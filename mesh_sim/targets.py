@@ -13,14 +13,12 @@ model gives the horizontal track ``(n(t), e(t))`` and the terrain gives the heig
   closed form; the peak speed is ``2πωd √5 ≈ 8.0`` m/s for ``d = 20`` m, ``ω = 0.0285`` Hz).
 * :class:`SingerTarget` — "man-like" manoeuvring target, spec 004 §4.4 (Eqs. 16-17, Singer-type).
 
-:func:`targets_from_config` builds them from TOML-like tables; :func:`truth_snapshot` turns them
-into plain data for the wire.
+:mod:`mesh_sim.target_set` builds them from TOML-like tables and turns them into plain data for the wire.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from numbers import Integral, Real
 from typing import Any, Protocol, runtime_checkable
@@ -35,11 +33,10 @@ __all__ = [
     "ConstantVelocityTarget",
     "Figure8Target",
     "SingerTarget",
-    "targets_from_config",
-    "truth_snapshot",
 ]
 
-_FLAT = FlatTerrain()
+#: The ground a target rides on when it is given no terrain: flat at 0 m.
+FLAT_GROUND = FlatTerrain()
 
 
 @runtime_checkable
@@ -69,9 +66,11 @@ def _vec2(value: Any, name: str) -> tuple[float, float]:
     return float(arr[0]), float(arr[1])
 
 
-def _real(
+def as_real(
     value: Any, name: str, *, positive: bool = False, non_negative: bool = False, allow_inf: bool = False
 ) -> float:
+    """``value`` as a float: a real number (not a bool), finite (``+inf`` too with ``allow_inf``) and, if asked,
+    positive or non-negative; ``ValueError`` naming ``name`` otherwise (for the models and the config parser)."""
     if isinstance(value, bool) or not isinstance(value, Real):
         raise ValueError(f"{name} must be a number, got {value!r}")
     value = float(value)
@@ -108,7 +107,7 @@ class StaticTarget:
 
     position: tuple[float, float]
     id: str = field(default="static", kw_only=True)
-    terrain: Terrain = field(default=_FLAT, kw_only=True)
+    terrain: Terrain = field(default=FLAT_GROUND, kw_only=True)
 
     def __post_init__(self):
         object.__setattr__(self, "position", _vec2(self.position, "position"))
@@ -126,7 +125,7 @@ class ConstantVelocityTarget:
     position: tuple[float, float]
     velocity: tuple[float, float]
     id: str = field(default="cv", kw_only=True)
-    terrain: Terrain = field(default=_FLAT, kw_only=True)
+    terrain: Terrain = field(default=FLAT_GROUND, kw_only=True)
 
     def __post_init__(self):
         object.__setattr__(self, "position", _vec2(self.position, "position"))
@@ -156,13 +155,13 @@ class Figure8Target:
     omega: float = 0.0285
     heading: float = 0.0
     id: str = field(default="figure8", kw_only=True)
-    terrain: Terrain = field(default=_FLAT, kw_only=True)
+    terrain: Terrain = field(default=FLAT_GROUND, kw_only=True)
 
     def __post_init__(self):
         object.__setattr__(self, "center", _vec2(self.center, "center"))
-        object.__setattr__(self, "d", _real(self.d, "d", positive=True))
-        object.__setattr__(self, "omega", _real(self.omega, "omega", positive=True))
-        object.__setattr__(self, "heading", _real(self.heading, "heading"))
+        object.__setattr__(self, "d", as_real(self.d, "d", positive=True))
+        object.__setattr__(self, "omega", as_real(self.omega, "omega", positive=True))
+        object.__setattr__(self, "heading", as_real(self.heading, "heading"))
         _check_common(self)
 
     @property
@@ -219,7 +218,7 @@ class SingerTarget:
     acceleration: tuple[float, float] = (0.0, 0.0)
     max_horizon: float = 86_400.0  # chosen here: a day of simulation time bounds the memory
     id: str = field(default="singer", kw_only=True)
-    terrain: Terrain = field(default=_FLAT, kw_only=True)
+    terrain: Terrain = field(default=FLAT_GROUND, kw_only=True)
     _chunks: list = field(init=False, repr=False, compare=False, default_factory=list)
 
     CHUNK_SECONDS = 60.0  # chosen here
@@ -228,11 +227,11 @@ class SingerTarget:
         object.__setattr__(self, "position", _vec2(self.position, "position"))
         object.__setattr__(self, "velocity", _vec2(self.velocity, "velocity"))
         object.__setattr__(self, "acceleration", _vec2(self.acceleration, "acceleration"))
-        object.__setattr__(self, "alpha", _real(self.alpha, "alpha", positive=True))
-        object.__setattr__(self, "sigma", _real(self.sigma, "sigma", non_negative=True))
-        object.__setattr__(self, "dt", _real(self.dt, "dt", positive=True))
-        object.__setattr__(self, "max_speed", _real(self.max_speed, "max_speed", positive=True, allow_inf=True))
-        object.__setattr__(self, "max_horizon", _real(self.max_horizon, "max_horizon", positive=True))
+        object.__setattr__(self, "alpha", as_real(self.alpha, "alpha", positive=True))
+        object.__setattr__(self, "sigma", as_real(self.sigma, "sigma", non_negative=True))
+        object.__setattr__(self, "dt", as_real(self.dt, "dt", positive=True))
+        object.__setattr__(self, "max_speed", as_real(self.max_speed, "max_speed", positive=True, allow_inf=True))
+        object.__setattr__(self, "max_horizon", as_real(self.max_horizon, "max_horizon", positive=True))
         if isinstance(self.seed, bool) or not isinstance(self.seed, Integral) or self.seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
         object.__setattr__(self, "seed", int(self.seed))
@@ -312,98 +311,3 @@ class SingerTarget:
         n = pn + vn * s + 0.5 * (vn1 - vn) * s * f
         e = pe + ve * s + 0.5 * (ve1 - ve) * s * f
         return _on_terrain(self.terrain, float(n), float(e), float(vn_t), float(ve_t))
-
-
-# ---------------------------------------------------------------------------------------- config
-
-# kind -> (class, required fields, optional fields); each field maps to a parser below.
-_KINDS: dict[str, tuple[type, tuple[str, ...], tuple[str, ...]]] = {
-    "static": (StaticTarget, ("position",), ()),
-    "constant_velocity": (ConstantVelocityTarget, ("position", "velocity"), ()),
-    "figure8": (Figure8Target, ("center",), ("d", "omega", "heading_deg")),
-    "singer": (
-        SingerTarget,
-        ("position", "velocity", "alpha", "sigma", "seed"),
-        ("dt", "max_speed", "acceleration", "max_horizon"),
-    ),
-}
-_VECTORS = {"position", "velocity", "center", "acceleration"}
-_POSITIVE = {"d", "omega", "alpha", "dt", "max_speed", "max_horizon"}
-
-
-def _parse_field(name: str, value: Any) -> Any:
-    if name in _VECTORS:
-        if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
-            raise ValueError(f"must be a list [north, east] of 2 numbers, got {value!r}")
-        if len(value) != 2:
-            raise ValueError(f"must have 2 entries [north, east], got {len(value)}")
-        return tuple(_real(v, f"entry {i}") for i, v in enumerate(value))
-    if name == "seed":
-        if isinstance(value, bool) or not isinstance(value, Integral) or value < 0:
-            raise ValueError(f"must be a non-negative integer, got {value!r}")
-        return int(value)
-    if name == "heading_deg":
-        return math.radians(_real(value, "value"))
-    return _real(value, "value", positive=name in _POSITIVE, non_negative=name == "sigma")
-
-
-def targets_from_config(configs: Sequence[Mapping[str, Any]], terrain: Terrain | None = None) -> list:
-    """Build targets from TOML-like tables, all riding on ``terrain`` (flat at 0 m if ``None``):
-
-    - ``{"id": "t0", "kind": "static", "position": [n, e]}``
-    - ``{"kind": "constant_velocity", "position": [n, e], "velocity": [vn, ve]}``
-    - ``{"kind": "figure8", "center": [n, e], "d": 20, "omega": 0.0285, "heading_deg": 0}``
-    - ``{"kind": "singer", "position": [n, e], "velocity": [vn, ve], "alpha": 0.1, "sigma": 0.5,
-      "seed": 3, "dt": 0.05, "max_speed": 8.0, "acceleration": [an, ae], "max_horizon": 86400}``
-
-    ``id`` defaults to ``"t<index>"`` and must be unique. Angles are degrees in the config and radians
-    inside. Unknown kinds or keys, missing keys, wrong lengths and non-finite or out-of-range numbers
-    raise :class:`ValueError` naming the target and the field."""
-    if isinstance(configs, Mapping) or isinstance(configs, (str, bytes)) or not isinstance(configs, Sequence):
-        raise ValueError(f"targets config must be a list of tables, got {type(configs).__name__}")
-    terrain = _FLAT if terrain is None else terrain
-    targets = []
-    seen: set[str] = set()
-    for index, config in enumerate(configs):
-        if not isinstance(config, Mapping):
-            raise ValueError(f"target #{index}: must be a table, got {type(config).__name__}")
-        tid = config.get("id", f"t{index}")
-        where = f"target #{index}" if not isinstance(tid, str) else f"target {tid!r} (#{index})"
-        if not isinstance(tid, str) or not tid:
-            raise ValueError(f"{where}: field 'id' must be a non-empty string, got {tid!r}")
-        if tid in seen:
-            raise ValueError(f"{where}: field 'id' duplicates an earlier target")
-        seen.add(tid)
-        kind = config.get("kind")
-        if kind not in _KINDS:
-            raise ValueError(f"{where}: field 'kind' must be one of {sorted(_KINDS)}, got {kind!r}")
-        cls, required, optional = _KINDS[kind]
-        for name in required:
-            if name not in config:
-                raise ValueError(f"{where}: missing field {name!r} (required for kind {kind!r})")
-        unknown = sorted(set(config) - {"id", "kind", *required, *optional})
-        if unknown:
-            raise ValueError(f"{where}: unknown field(s) {unknown} for kind {kind!r}")
-        kwargs = {}
-        for name in (*required, *optional):
-            if name in config:
-                try:
-                    kwargs[name] = _parse_field(name, config[name])
-                except ValueError as err:
-                    raise ValueError(f"{where}: field {name!r} {err}") from None
-        if "heading_deg" in kwargs:
-            kwargs["heading"] = kwargs.pop("heading_deg")
-        try:
-            targets.append(cls(**kwargs, id=tid, terrain=terrain))
-        except ValueError as err:
-            raise ValueError(f"{where}: {err}") from None
-    return targets
-
-
-def truth_snapshot(targets: Sequence[Target], t: float) -> list[dict]:
-    """Plain data for the wire: ``[{"id", "position": [n, e, d], "velocity": [vn, ve, vd]}]`` at ``t``."""
-    out = []
-    for target in targets:
-        p, v = target.state(t)
-        out.append({"id": target.id, "position": [float(x) for x in p], "velocity": [float(x) for x in v]})
-    return out

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.agent import FUTURE_EPOCHS
 from agent.beliefs.tracking import Tracker
+from agent.beliefs.tracks import FUTURE_EPOCHS
 from agent.evaluation import TrackEvaluator
 from agent.net import wire
 from agent.net.keys import Keys
@@ -28,7 +28,7 @@ from agent.sensors.bearing import Bearing
 from mesh_sim.fire import FireWorld
 from mesh_sim.grid_oracle import GridOracle, grid_extent
 from mesh_sim.scenario import load
-from mesh_sim.targets import truth_snapshot
+from mesh_sim.target_set import truth_snapshot
 from perception.terrain import terrain_from_config
 
 log = logging.getLogger("skymesh.world")

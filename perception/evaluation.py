@@ -6,7 +6,7 @@
 * :func:`segmentation_rates` gives per-pixel ``P_D``, ``P_F`` and IoU of a fire segmenter.
 * :func:`sequence` renders a labelled flight over targets (and fires) for both; the same scenes
   back the tests in ``tests/perception`` and the table printed by
-  ``python -m perception.detector_bench``.
+  ``python -m mesh_sim.bench.detection_rates``.
 """
 
 from __future__ import annotations

@@ -11,7 +11,8 @@ from scipy.stats import multivariate_normal
 
 from fusion import mixture as mixture_module
 from fusion.mixture import GaussianMixture
-from fusion.particles import ParticleSet, optimal_bandwidth
+from fusion.particles import ParticleSet
+from fusion.resampling import optimal_bandwidth
 
 NAN, INF = float("nan"), float("inf")
 

@@ -9,7 +9,8 @@ from scipy.stats import multivariate_normal
 
 from fusion.mixture import GaussianMixture
 from fusion.particle_fusion import ParticleChannelFilter, UniformBox, fuse_bayes, fuse_lop
-from fusion.particles import ParticleSet, optimal_bandwidth
+from fusion.particles import ParticleSet
+from fusion.resampling import optimal_bandwidth
 
 NAN = float("nan")
 

@@ -11,16 +11,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.stats import multivariate_normal
 
-from fusion.particles import (
-    RESAMPLE_THRESHOLD,
-    DegenerateWeightsError,
-    InformationTrigger,
-    ParticleSet,
-    SIRConfig,
-    optimal_bandwidth,
-    sir_update,
-    systematic_indices,
-)
+from fusion.particles import RESAMPLE_THRESHOLD, InformationTrigger, ParticleSet, SIRConfig, sir_update
+from fusion.resampling import DegenerateWeightsError, optimal_bandwidth, systematic_indices
 
 NAN, INF = float("nan"), float("inf")
 positive_weights = arrays(np.float64, st.integers(1, 60), elements=st.floats(0.0, 1.0)).filter(lambda w: w.sum() > 1e-3)

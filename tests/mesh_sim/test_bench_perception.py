@@ -1,4 +1,5 @@
-"""The perception and coop-vs-single benchmarks at their smallest settings: well-formed results and tables."""
+"""The perception and coop-vs-single benchmarks and the detection-rate tables at their smallest settings:
+well-formed results and tables."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import math
 import pytest
 from rich.console import Console
 
-from mesh_sim.bench import common, coop_vs_single, perception
+from mesh_sim.bench import common, coop_vs_single, detection_rates, perception
 
 pytestmark = pytest.mark.slow  # benchmark runs
 
@@ -87,3 +88,11 @@ def test_coop_vs_single_rejects_bad_settings():
         coop_vs_single.run(quick=True, runs=2, filter_runs=3)
     with pytest.raises(ValueError):
         coop_vs_single.run(quick=True, runs=2, filter_runs=1, duration=10.0)  # nothing after the warm-up
+
+
+def test_detection_rates_prints_both_tables(capsys):
+    detection_rates.main(["--frames", "3", "--width", "160", "--height", "120"])
+    text = capsys.readouterr().out
+    assert "Target detection, 3 frames per row, 160x120" in text and "Fire segmentation (per pixel)" in text
+    for condition in detection_rates.CONDITIONS:
+        assert condition in text

@@ -20,7 +20,8 @@ from agent.net import wire
 from agent.net.keys import Incoming, Keys
 from agent.net.zenoh_transport import ZenohTransport, client_config, router_config
 from fusion.measurement import azel_to_los
-from mesh_sim.observer import Observer, cov_to_ellipsoid, quat_xyzw_to_matrix, ray_end
+from mesh_sim.observer import Observer
+from mesh_sim.observer_geometry import cov_to_ellipsoid, quat_xyzw_to_matrix, ray_end
 
 REPO = Path(__file__).resolve().parents[2]
 ORANGE_U32 = (255 << 24) | (150 << 16) | (0 << 8) | 255

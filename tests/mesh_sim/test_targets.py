@@ -9,15 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from mesh_sim.targets import (
-    ConstantVelocityTarget,
-    Figure8Target,
-    SingerTarget,
-    StaticTarget,
-    Target,
-    targets_from_config,
-    truth_snapshot,
-)
+from mesh_sim.target_set import targets_from_config, truth_snapshot
+from mesh_sim.targets import ConstantVelocityTarget, Figure8Target, SingerTarget, StaticTarget, Target
 from perception.terrain import FlatTerrain, HillsTerrain
 
 HILLS = HillsTerrain(amplitude=15.0, wavelength=120.0, seed=1)

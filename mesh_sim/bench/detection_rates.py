@@ -1,6 +1,6 @@
 """Measured detection / false-alarm rates of the synthetic camera and the detectors.
 
-``python -m perception.detector_bench [--frames 60] [--width 640 --height 480]`` prints two tables:
+``python -m mesh_sim.bench.detection_rates [--frames 60] [--width 640 --height 480]`` prints two tables:
 target detection per detector and condition (clean, banding in half the frames, transient speckles,
 three kinds of failed camera) with the video-quality D(t); and per-pixel fire segmentation (thermal
 threshold, visual histogram trained on other frames).
