@@ -16,7 +16,7 @@ import numpy as np
 
 from agent.beliefs.grid_config import GridConfig
 from agent.beliefs.tracking import TrackerConfig
-from agent.net.netem import LinkPlan
+from agent.net.link_plan import LinkPlan
 from agent.net.sending import SendConfig
 from agent.sensors.bearing import BearingSensorConfig
 from agent.sensors.camera import CameraSensorConfig, sensor_config_from_dict

@@ -1,14 +1,15 @@
 """Compile a scenario's ``[radio]`` section into the agents' link plan (DESIGN.md §6).
 
-The plan is plain data (schema in :class:`agent.net.netem.LinkPlan`); every agent enforces it in its own
-transport. A ``[radio]`` section, all keys optional::
+The plan is plain data (schema in :class:`agent.net.link_plan.LinkPlan`); every agent enforces it in its own
+transport. The section is checked with the plan's own checks (:mod:`agent.net.plan_checks`). A ``[radio]``
+section, all keys optional::
 
     [radio]
     topology = "ring"          # full (default) | ring | star | line | tree | random | disk
     mean_degree = 3.0          # random only: mean node degree (connected: a random spanning tree + edges)
     hub = "uav0"               # star only: the hub (default: the first agent)
     range = 250.0              # metres; required by "disk" (no fixed edges, only range), optional otherwise
-    preset = "wifi"            # ideal (default) | wifi | cellular | lossy  (agent.net.netem.PRESETS)
+    preset = "wifi"            # ideal (default) | wifi | cellular | lossy  (agent.net.link_plan.PRESETS)
     loss = 0.01                # netem-named overrides of the preset: loss (0..1), delay_ms, jitter_ms,
     delay_ms = 5.0             #   rate (bytes/s, 0 = unlimited), burst (bytes)
     [radio.gilbert_elliott]    # netem "loss gemodel p r 1-h 1-k"; replaces the Bernoulli loss
@@ -35,14 +36,15 @@ apply in file order and make one phase. Random topologies are drawn from the sce
 
 from __future__ import annotations
 
-import math
 import random
+from dataclasses import fields
 from itertools import combinations
 
-from agent.net.netem import PRESETS, GilbertElliott, LinkParams, LinkPlan
+from agent.net.link_plan import PRESETS, GilbertElliott, LinkParams, LinkPlan
+from agent.net.plan_checks import AgentNames, check_keys, check_number, lose_node
 
 TOPOLOGIES = ("full", "ring", "star", "line", "tree", "random", "disk")
-PARAM_KEYS = ("loss", "delay_ms", "jitter_ms", "rate", "burst")
+PARAM_KEYS = tuple(f.name for f in fields(LinkParams) if f.name != "ge")  # [radio] spells ge gilbert_elliott
 RADIO_KEYS = frozenset(
     {"topology", "preset", "range", "mean_degree", "hub", "gilbert_elliott", "links", "events", *PARAM_KEYS}
 )
@@ -95,9 +97,8 @@ def topology_edges(
     if kind not in TOPOLOGIES:
         raise ValueError(f"radio.topology: unknown topology {kind!r}; known: {list(TOPOLOGIES)}")
     agents = list(agents)
+    names = AgentNames("radio", agents)
     n = len(agents)
-    if len(set(agents)) != n:
-        raise ValueError("radio: agent names must be unique")
     if mean_degree is not None and kind != "random":
         raise ValueError(f"radio.mean_degree: only applies to topology = \"random\", not {kind!r}")
     if hub is not None and kind != "star":
@@ -112,17 +113,14 @@ def topology_edges(
     if kind == "line":
         return {_edge(a, b) for a, b in zip(agents, agents[1:], strict=False)}
     if kind == "star":
-        centre = agents[0] if hub is None else hub
-        if centre not in agents:
-            raise ValueError(f"radio.hub: unknown agent {centre!r}")
+        centre = agents[0] if hub is None else names.agent(hub, "radio.hub")
         return {_edge(centre, a) for a in agents if a != centre}
     if kind == "tree":
         return _prufer_tree(agents, rng)
     # random
     if mean_degree is None:
         raise ValueError("radio.mean_degree: required by topology = \"random\"")
-    if isinstance(mean_degree, bool) or not isinstance(mean_degree, int | float) or not math.isfinite(mean_degree):
-        raise ValueError(f"radio.mean_degree: must be a number, got {mean_degree!r}")
+    mean_degree = check_number("radio.mean_degree", mean_degree)
     m = round(mean_degree * n / 2)
     lo, hi = n - 1, n * (n - 1) // 2
     if not lo <= m <= hi:
@@ -179,21 +177,15 @@ class _State:
 
 
 def compile_plan(radio: dict, agents: list[str], seed: int) -> dict:
-    """The link plan (plain data, see :class:`agent.net.netem.LinkPlan`) for a ``[radio]`` section.
+    """The link plan (plain data, see :class:`agent.net.link_plan.LinkPlan`) for a ``[radio]`` section.
 
     Raises ValueError naming the problem: unknown keys, topologies, presets, event kinds or agent names,
-    event times that go backwards, and anything :class:`agent.net.netem.LinkPlan` rejects.
+    event times that go backwards, and anything :class:`agent.net.link_plan.LinkPlan` rejects.
     """
     radio = {} if radio is None else radio
-    if not isinstance(radio, dict):
-        raise ValueError(f"radio: must be a table, got {type(radio).__name__}")
-    unknown = sorted(set(radio) - RADIO_KEYS)
-    if unknown:
-        raise ValueError(f"radio: unknown key(s) {unknown}; known: {sorted(RADIO_KEYS)}")
+    check_keys("radio", radio, RADIO_KEYS)
     agents = list(agents)
-    if not agents or len(set(agents)) != len(agents):
-        raise ValueError(f"radio: agents must be a non-empty list of unique names, got {agents!r}")
-    known = set(agents)
+    names = AgentNames("radio", agents)
 
     kind = radio.get("topology", "full")
     range_ = radio.get("range")
@@ -202,27 +194,11 @@ def compile_plan(radio: dict, agents: list[str], seed: int) -> dict:
     base = topology_edges(kind, agents, seed, radio.get("mean_degree"), radio.get("hub"))
     default = _params(radio)
 
-    def agent(name, where):
-        if not isinstance(name, str) or name not in known:
-            raise ValueError(f"{where}: unknown agent {name!r}; agents: {agents}")
-        return name
-
-    def pair(x, where):
-        if not isinstance(x, list | tuple) or len(x) != 2:
-            raise ValueError(f"{where}: link must be a pair [a, b], got {x!r}")
-        a, b = agent(x[0], where), agent(x[1], where)
-        if a == b:
-            raise ValueError(f"{where}: link [{a!r}, {b!r}] joins an agent to itself")
-        return a, b
-
     links = []
     for i, entry in enumerate(radio.get("links") or []):
         where = f"radio.links[{i}]"
-        if not isinstance(entry, dict):
-            raise ValueError(f"{where}: must be a table")
-        extra = sorted(set(entry) - {"src", "dst", "gilbert_elliott", *PARAM_KEYS})
-        if extra:
-            raise ValueError(f"{where}: unknown key(s) {extra}")
+        check_keys(where, entry, {"src", "dst", "gilbert_elliott", *PARAM_KEYS}, required=("src", "dst"))
+        names.pair((entry["src"], entry["dst"]), where)
         entry = dict(entry)
         if "gilbert_elliott" in entry:
             entry["ge"] = GilbertElliott.from_dict(entry.pop("gilbert_elliott"), f"{where}.gilbert_elliott").to_dict()
@@ -230,7 +206,7 @@ def compile_plan(radio: dict, agents: list[str], seed: int) -> dict:
 
     state = _State(agents, base)
     phases = [state.phase(0.0)]
-    down_nodes = []
+    lost: dict[str, float] = {}  # node -> time lost
     events = radio.get("events") or []
     if not isinstance(events, list):
         raise ValueError("radio.events: must be an array of tables ([[radio.events]])")
@@ -243,16 +219,8 @@ def compile_plan(radio: dict, agents: list[str], seed: int) -> dict:
         if ev_kind not in EVENT_KEYS:
             raise ValueError(f"{where}: unknown kind {ev_kind!r}; known: {sorted(EVENT_KEYS)}")
         where = f"{where} ({ev_kind})"
-        bad = sorted(set(ev) - {"t", "kind"} - EVENT_KEYS[ev_kind])
-        if bad:
-            raise ValueError(f"{where}: unknown key(s) {bad}; {ev_kind} takes {sorted(EVENT_KEYS[ev_kind])}")
-        missing = [k for k in ("t", *EVENT_REQUIRED.get(ev_kind, ())) if k not in ev]
-        if missing:
-            raise ValueError(f"{where}: missing key(s) {missing}")
-        t = ev["t"]
-        if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t) or t < 0:
-            raise ValueError(f"{where}: t must be a number >= 0, got {t!r}")
-        t = float(t)
+        check_keys(where, ev, {"t", "kind", *EVENT_KEYS[ev_kind]}, required=("t", *EVENT_REQUIRED.get(ev_kind, ())))
+        t = check_number(f"{where}.t", ev["t"], lo=0.0)
         if t < last_t:
             raise ValueError(
                 f"{where}: t = {t:g} is before the previous event (t = {last_t:g}); times must not decrease"
@@ -268,7 +236,7 @@ def compile_plan(radio: dict, agents: list[str], seed: int) -> dict:
                 if not isinstance(members, list) or not members:
                     raise ValueError(f"{where}: groups[{g}] must be a non-empty list of agent names")
                 for name in members:
-                    agent(name, where)
+                    names.agent(name, where)
                     if name in group:
                         raise ValueError(f"{where}: agent {name!r} is in more than one group")
                     group[name] = g
@@ -281,7 +249,7 @@ def compile_plan(radio: dict, agents: list[str], seed: int) -> dict:
             state.extra.clear()
             state.cut.clear()
         elif ev_kind in ("link_down", "link_up"):
-            a, b = pair(ev["link"], where)
+            a, b = names.pair(ev["link"], where)
             directed = ev.get("directed", False)
             if not isinstance(directed, bool):
                 raise ValueError(f"{where}: directed must be true or false, got {directed!r}")
@@ -302,10 +270,7 @@ def compile_plan(radio: dict, agents: list[str], seed: int) -> dict:
                     if e not in state.base:
                         state.extra.add(e)
         else:  # node_loss
-            node = agent(ev["node"], where)
-            if any(d["node"] == node for d in down_nodes):
-                raise ValueError(f"{where}: node {node!r} is lost twice")
-            down_nodes.append({"t": t, "node": node})
+            lose_node(lost, names.agent(ev["node"], where), t, where)
 
         ph = state.phase(t)
         if ph["t"] == phases[-1]["t"]:
@@ -320,7 +285,7 @@ def compile_plan(radio: dict, agents: list[str], seed: int) -> dict:
         "links": links,
         "range": range_,
         "phases": phases,
-        "down_nodes": down_nodes,
+        "down_nodes": [{"t": when, "node": node} for node, when in lost.items()],
     }
     LinkPlan.from_dict(plan)  # validate the whole plan here, where the scenario can still be named
     return plan

@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.net.netem import TokenBucket
+from agent.net.link_emulator import TokenBucket
+from agent.net.link_plan import default_burst
 
 
 @dataclass(frozen=True)
@@ -43,7 +44,7 @@ def information(track) -> float:
 class SendScheduler:
     def __init__(self, config: SendConfig, budget: float | None, burst: float | None = None):
         self.config = config
-        self.bucket = None if budget is None else TokenBucket(budget, burst or max(65536.0, 0.1 * budget))
+        self.bucket = None if budget is None else TokenBucket(budget, burst or default_burst(budget))
         self._next = 0.0
         self._sent: dict[int, tuple[float, float]] = {}  # track id -> (time, information) when last sent
         self.thinned = 0  # tracks that were due but did not fit the budget

@@ -6,7 +6,8 @@ from collections import Counter
 
 import pytest
 
-from agent.net.netem import GilbertElliott, LinkEmulator, LinkParams, LinkPlan
+from agent.net.link_emulator import LinkEmulator
+from agent.net.link_plan import GilbertElliott, LinkParams, LinkPlan
 from mesh_sim.radio import compile_plan, topology_edges
 
 AGENTS = [f"uav{i}" for i in range(8)]
@@ -240,12 +241,14 @@ def test_plan_is_json_and_deterministic():
         ({"rate": -1}, "rate"),
         ({"loss": 0.1, "gilbert_elliott": {"p": 0.1, "r": 0.2}}, "one loss model"),
         ({"gilbert_elliott": {"p": 0.1}}, "gilbert_elliott"),
-        ({"links": [{"src": "uav0", "dst": "uav9"}]}, "uav9"),
+        ({"links": [{"src": "uav0", "dst": "uav9"}]}, r"radio\.links\[0\]: unknown agent 'uav9'"),
         ({"links": [{"src": "uav0", "dst": "uav1", "drop": 1}]}, "drop"),
+        ({"links": [{"src": "uav0"}]}, r"radio\.links\[0\]: missing key\(s\) \['dst'\]"),
+        ({"links": [{"src": "uav0", "dst": "uav0"}]}, r"radio\.links\[0\]: .* joins an agent to itself"),
         ({"events": [{"t": 1, "kind": "explode"}]}, "explode"),
         ({"events": [{"t": 1, "kind": "merge", "groups": []}]}, "groups"),
         ({"events": [{"kind": "merge"}]}, "missing"),
-        ({"events": [{"t": -1, "kind": "merge"}]}, "t must be"),
+        ({"events": [{"t": -1, "kind": "merge"}]}, r"events\[0\] \(merge\)\.t: must be >= 0, got -1"),
         ({"events": [{"t": 1, "kind": "partition", "groups": [["uav0", "ghost"]]}]}, "ghost"),
         ({"events": [{"t": 1, "kind": "partition", "groups": [["uav0"], ["uav0", "uav1"]]}]}, "more than one group"),
         ({"events": [{"t": 1, "kind": "link_down", "link": ["uav0", "uav9"]}]}, "uav9"),
@@ -253,7 +256,7 @@ def test_plan_is_json_and_deterministic():
         ({"topology": "ring", "events": [{"t": 1, "kind": "link_down", "link": ["uav0", "uav4"]}]}, "not in the ring"),
         ({"events": [{"t": 1, "kind": "node_loss", "node": "uav8"}]}, "uav8"),
         ({"events": [{"t": 1, "kind": "node_loss", "node": "uav1"}, {"t": 2, "kind": "node_loss", "node": "uav1"}]},
-         "twice"),
+         r"events\[1\] \(node_loss\): node 'uav1' is lost twice"),
         ({"events": [{"t": 5, "kind": "merge"}, {"t": 4, "kind": "merge"}]}, r"events\[1\].*before the previous"),
     ],
 )

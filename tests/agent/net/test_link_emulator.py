@@ -1,10 +1,9 @@
-"""Link emulation (agent/net/netem.py): statistics against closed forms, determinism, the plan, errors.
+"""Link emulation (agent/net/link_emulator.py): statistics against closed forms, determinism, the gate, errors.
 
 Statistical tests use fixed seeds; every tolerance is derived from the sampling distribution (a
 binomial 99.9 % interval, or about 4.5 standard errors), so each test fails if the claim is false.
 """
 
-import json
 import math
 import random
 
@@ -14,18 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from agent.net.netem import (
-    PRESETS,
-    GilbertElliott,
-    GilbertElliottChain,
-    LinkEmulator,
-    LinkParams,
-    LinkPlan,
-    TokenBucket,
-    Verdict,
-    netem_command,
-    uniform,
-)
+from agent.net.link_emulator import GilbertElliottChain, LinkEmulator, TokenBucket, Verdict, uniform
+from agent.net.link_plan import GilbertElliott, LinkPlan
 
 AGENTS = ["uav0", "uav1", "uav2", "uav3"]
 
@@ -198,12 +187,6 @@ def test_emulator_rate_drops_and_counters():
     assert em.admit("uav2", 0, 1000, 0.0).delivered  # each link has its own bucket
 
 
-def test_default_burst():
-    assert LinkParams(rate=1e5).bucket_depth == 64 * 1024
-    assert LinkParams(rate=1e7).bucket_depth == pytest.approx(1e6)
-    assert LinkParams(rate=1e7, burst=3000).bucket_depth == 3000
-    assert LinkParams(rate=0).rate is None and LinkParams(rate=0).bucket_depth is None
-
 
 def test_sender_budget_is_tightest_outgoing_rate():
     links = [{"src": "uav0", "dst": "uav2", "rate": 5e5}, {"src": "uav3", "dst": "uav0", "rate": 1e3}]
@@ -333,100 +316,6 @@ def test_cause_order_down_before_range_before_loss():
     p["phases"] = [{"t": 0.0, "edges": "all"}]
     assert LinkEmulator("uav0", p).admit("uav1", 1, 10, 0.0, far).cause == "range"
     assert LinkEmulator("uav0", p).admit("uav1", 1, 10, 0.0).cause == "loss"
-
-
-def test_per_link_overrides():
-    p = plan({"loss": 0.0, "delay_ms": 1.0}, links=[{"src": "uav1", "dst": "uav0", "loss": 1.0}])
-    lp = LinkPlan.from_dict(p)
-    assert lp.params("uav1", "uav0").loss == 1.0 and lp.params("uav1", "uav0").delay_ms == 1.0
-    assert lp.params("uav0", "uav1").loss == 0.0  # directed
-    p = plan({"ge": {"p": 0.1, "r": 0.5}}, links=[{"src": "uav1", "dst": "uav0", "loss": 0.2}])
-    assert LinkPlan.from_dict(p).params("uav1", "uav0") == LinkParams(loss=0.2)
-
-
-def test_plan_is_plain_json_data():
-    p = plan({"ge": {"p": 0.1, "r": 0.5}}, range=50.0, phases=[{"t": 0, "edges": [["uav0", "uav1"]]}])
-    assert LinkPlan.from_dict(json.loads(json.dumps(p))).params("uav0", "uav1").ge == GilbertElliott(0.1, 0.5)
-
-
-# ---- presets and netem commands ---------------------------------------------------------------------
-
-
-def test_presets_parse_and_match_the_anchors():
-    assert set(PRESETS) == {"ideal", "wifi", "cellular", "lossy"}
-    for params in PRESETS.values():
-        assert LinkParams.from_dict(params.to_dict()) == params
-        assert LinkParams.from_dict(json.loads(json.dumps(params.to_dict()))) == params
-    wifi, cell, lossy = PRESETS["wifi"], PRESETS["cellular"], PRESETS["lossy"]
-    assert (wifi.rate * 8, wifi.delay_ms, wifi.loss) == (60e6, 2.0, 0.0014)
-    assert (cell.delay_ms, cell.loss) == (100.0, 0.005)
-    assert (lossy.loss, lossy.delay_ms) == (0.30, 10.0)
-    assert PRESETS["ideal"] == LinkParams()
-
-
-def test_netem_commands():
-    assert netem_command("eth0", PRESETS["ideal"]) == "tc qdisc add dev eth0 root netem"
-    assert netem_command("eth0", PRESETS["wifi"]) == "tc qdisc add dev eth0 root netem delay 2ms loss 0.14% rate 60mbit"
-    assert (
-        netem_command("wlan1", LinkParams(delay_ms=100, jitter_ms=10, loss=0.005, rate=1000))
-        == "tc qdisc add dev wlan1 root netem delay 100ms 10ms distribution normal loss 0.5% rate 8kbit"
-    )
-    ge = LinkParams(ge=GilbertElliott(p=0.05, r=0.25, one_minus_h=0.7, one_minus_k=0.001))
-    assert netem_command("eth0", ge) == "tc qdisc add dev eth0 root netem loss gemodel 5% 25% 70% 0.1%"
-    assert netem_command("veth0", LinkParams(rate=100.5)) == "tc qdisc add dev veth0 root netem rate 804bit"
-    with pytest.raises(ValueError, match="dev"):
-        netem_command("eth 0", PRESETS["wifi"])
-
-
-# ---- errors -------------------------------------------------------------------------------------------
-
-
-@pytest.mark.parametrize(
-    ("d", "field"),
-    [
-        ({"loss": -0.1}, "loss"),
-        ({"loss": 1.5}, "loss"),
-        ({"loss": True}, "loss"),
-        ({"loss": "1%"}, "loss"),
-        ({"delay_ms": -1.0}, "delay_ms"),
-        ({"delay_ms": math.nan}, "delay_ms"),
-        ({"jitter_ms": -0.5}, "jitter_ms"),
-        ({"rate": -5}, "rate"),
-        ({"rate": math.inf}, "rate"),
-        ({"rate": 1e5, "burst": 100}, "burst"),
-        ({"ge": {"p": 1.2, "r": 0.1}}, "ge.p"),
-        ({"ge": {"p": 0.1, "r": -0.1}}, "ge.r"),
-        ({"ge": {"p": 0.1}}, "missing"),
-        ({"ge": {"p": 0.1, "r": 0.2, "h": 0.5}}, "'h'"),
-        ({"loss": 0.1, "ge": {"p": 0.1, "r": 0.2}}, "one loss model"),
-        ({"lost": 0.1}, "lost"),
-    ],
-)
-def test_bad_params_name_the_field(d, field):
-    with pytest.raises(ValueError, match=field):
-        LinkParams.from_dict(d)
-
-
-@pytest.mark.parametrize(
-    ("change", "message"),
-    [
-        ({"agents": ["a", "a"]}, "duplicate"),
-        ({"seed": 1.5}, "seed"),
-        ({"colour": 1}, "colour"),
-        ({"range": -3}, "range"),
-        ({"phases": [{"t": 0, "edges": [["uav0", "uav9"]]}]}, "uav9"),
-        ({"phases": [{"t": 0, "edges": [["uav0", "uav0"]]}]}, "self-link"),
-        ({"phases": [{"t": 0, "edges": "all"}, {"t": 0, "edges": "all"}]}, "not after"),
-        ({"phases": [{"t": 0, "edges": "some"}]}, "edges"),
-        ({"links": [{"src": "uav0", "dst": "uav1"}, {"src": "uav0", "dst": "uav1"}]}, "twice"),
-        ({"links": [{"src": "uav0", "dst": "uav1", "loss": 2}]}, r"links\[0\].*loss"),
-        ({"down_nodes": [{"t": 1, "node": "ghost"}]}, "ghost"),
-        ({"down_nodes": [{"t": 1, "node": "uav1"}, {"t": 2, "node": "uav1"}]}, "twice"),
-    ],
-)
-def test_bad_plans_say_where(change, message):
-    with pytest.raises(ValueError, match=message):
-        LinkPlan.from_dict({**plan(), **change})
 
 
 def test_bad_admit_arguments():
