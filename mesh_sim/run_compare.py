@@ -106,6 +106,7 @@ def snapshot(run_dir: str | Path) -> dict[str, Any]:
 
 
 def digested(files: dict[str, Any]) -> dict[str, Any]:
+    """:func:`snapshot` of an already loaded run (canonical JSON: sorted keys, floats in full precision)."""
     out: dict[str, Any] = {}
     for name, content in files.items():
         if name == ARRAYS:
