@@ -24,7 +24,7 @@ from agent.config import AgentScenario, read_scenario_file
 from agent.net.keys import Keys
 from agent.net.zenoh_transport import ZenohTransport, load_config
 from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
-from agent.sensors.camera import VideoSource
+from agent.sensors.video_source import VideoSource
 
 log = logging.getLogger("skymesh.agent")
 

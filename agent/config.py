@@ -19,7 +19,8 @@ from agent.beliefs.tracking import TrackerConfig
 from agent.net.link_plan import LinkPlan
 from agent.net.sending import SendConfig
 from agent.sensors.bearing import BearingSensorConfig
-from agent.sensors.camera import CameraSensorConfig, sensor_config_from_dict
+from agent.sensors.camera_config import CameraSensorConfig
+from agent.sensors.registry import sensor_config_from_dict
 
 #: Top-level keys that the world reads; the agent accepts and ignores them.
 WORLD_KEYS = frozenset({"targets", "radio", "description", "fire", "decoys"})

@@ -174,7 +174,7 @@ def _run(args) -> int:
 
 def _cameras(specs: list[str], agents: int) -> dict[str, str]:
     """``["uav0=clip.avi", ...]`` -> ``{"uav0": "clip.avi"}``, each source checked to open (then released)."""
-    from agent.sensors.camera import VideoSource
+    from agent.sensors.video_source import VideoSource
 
     cameras: dict[str, str] = {}
     names = {f"uav{i}" for i in range(agents)}

@@ -21,7 +21,7 @@ from agent.agent import Agent
 from agent.net.bus import InMemoryBus
 from agent.net.keys import Keys
 from agent.runtime import write_json
-from agent.sensors.camera import VideoSource
+from agent.sensors.video_source import VideoSource
 from mesh_sim import results
 from mesh_sim.scenario import Scenario
 from mesh_sim.world import World

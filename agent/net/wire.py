@@ -1,4 +1,4 @@
-"""The msgpack wire format (DESIGN.md §5): envelope, arrays, belief payloads and strict validation.
+"""The msgpack wire format (DESIGN.md §5): envelope, arrays and strict validation.
 
 One job: bytes <-> validated Python objects. No Zenoh, no clocks, no beliefs state here.
 
@@ -15,6 +15,9 @@ Envelope — a msgpack map with short keys (bandwidth is a first-class metric)::
 
 The MAC covers every byte of the message before the 32 MAC bytes (map header, all fields, the "mac"
 key and the bin header), so the receiver checks the exact bytes it received, never a re-encoding.
+
+Payload codecs live beside this module: :mod:`agent.net.gaussian_codec` (Gaussian and trajectory
+beliefs), :mod:`agent.net.grid_codec`, :mod:`agent.net.particle_wire` and :mod:`agent.net.fire_truth`.
 
 Arrays travel as msgpack ExtType ``EXT_NDARRAY`` whose data is::
 
@@ -40,10 +43,6 @@ from typing import Any
 
 import msgpack
 import numpy as np
-
-from fusion import validation
-from fusion.gaussian import Gaussian
-from fusion.trajectory import Trajectory, TrajectoryModel
 
 SCHEMA_VERSION = 1
 
@@ -89,7 +88,6 @@ MAX_CONTAINER_LEN = 4096  # msgpack array length
 MAX_MAP_LEN = 1024
 EXT_NDARRAY = 1
 ALLOWED_DTYPES: frozenset[str] = frozenset({"<f8", "<f4", "<i4", "<i8", "|u1", "<u2"})
-SYMMETRY_RTOL = 1e-9  # |Y - Y^T| <= SYMMETRY_RTOL * max(1, max|Y|)
 MAC_BYTES = 32
 
 _AGENT_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -240,7 +238,7 @@ def _check_header(obj: dict, kinds: Set[str]) -> None:
     """Version first (another version may have other fields), then the field set, types and ranges."""
     if "v" not in obj:
         raise DecodeError("bad_field", "missing field 'v' (version)")
-    if not _is_int(obj["v"]):
+    if not is_int(obj["v"]):
         raise DecodeError("bad_type", "version must be an int")
     if obj["v"] != SCHEMA_VERSION:
         raise DecodeError("version", f"schema version {obj['v']}, expected {SCHEMA_VERSION}")
@@ -251,7 +249,7 @@ def _check_header(obj: dict, kinds: Set[str]) -> None:
     kind, origin, seq, stamp, acks, payload = (obj[k] for k in "kostap")
     if not isinstance(kind, str) or not isinstance(origin, str) or not isinstance(payload, dict):
         raise DecodeError("bad_type", "kind and origin must be str, payload a map")
-    if not _is_int(seq) or isinstance(stamp, bool) or not isinstance(stamp, int | float) or not isinstance(acks, dict):
+    if not is_int(seq) or isinstance(stamp, bool) or not isinstance(stamp, int | float) or not isinstance(acks, dict):
         raise DecodeError("bad_type", "seq must be an int, stamp a number, acks a map")
     if not _AGENT_ID.fullmatch(origin):
         raise DecodeError("bad_field", f"origin {origin[:80]!r} is not an agent id")
@@ -262,7 +260,7 @@ def _check_header(obj: dict, kinds: Set[str]) -> None:
     if len(acks) > MAX_ACKS:
         raise DecodeError("oversize", f"{len(acks)} acks > {MAX_ACKS}")
     for peer, last in acks.items():
-        if not isinstance(peer, str) or not _is_int(last):
+        if not isinstance(peer, str) or not is_int(last):
             raise DecodeError("bad_type", "acks must map str agent ids to int seqs")
         if not _AGENT_ID.fullmatch(peer) or not 0 <= last < _SEQ_LIMIT:
             raise DecodeError("bad_field", f"ack {peer[:80]!r}: {last} is not an agent id and a seq")
@@ -294,7 +292,8 @@ def _plain(value):
     return value.item() if isinstance(value, np.integer | np.floating) else value
 
 
-def _is_int(value) -> bool:
+def is_int(value) -> bool:
+    """An int that is not a bool (msgpack gives bools for true/false)."""
     return isinstance(value, int) and not isinstance(value, bool)
 
 
@@ -363,110 +362,3 @@ def _ext_hook(code: int, data: bytes) -> np.ndarray:
             "bad_shape", f"shape {shape} of {dtype_str} needs {count * dtype.itemsize} bytes, got {len(raw)}"
         )
     return np.frombuffer(raw, dtype=dtype, count=count).reshape(shape).copy()
-
-
-# -- belief payloads ---------------------------------------------------------------------------------
-def encode_gaussian(g: Gaussian) -> dict:
-    """``{"y": (n,), "Y": (n, n)}`` as float64 (the full matrix: the receiver checks its symmetry)."""
-    return {"y": np.asarray(g.y, dtype=np.float64), "Y": np.asarray(g.Y, dtype=np.float64)}
-
-
-def decode_gaussian(d, dim: int | None = None) -> Gaussian:
-    """Validate a Gaussian payload: shapes (and ``dim`` if given), finite, Y symmetric PSD."""
-    _expect_keys(d, {"y", "Y"})
-    y, Y = _float_array(d["y"], "y"), _float_array(d["Y"], "Y")
-    if y.ndim != 1 or y.size == 0 or (dim is not None and y.shape != (dim,)):
-        raise DecodeError("bad_shape", f"y has shape {y.shape}, expected ({dim if dim is not None else 'n'},)")
-    if Y.shape != (y.size, y.size):
-        raise DecodeError("bad_shape", f"Y has shape {Y.shape}, expected {(y.size, y.size)}")
-    _check_finite(y, Y)
-    return Gaussian(y, _information_matrix(Y))
-
-
-def encode_trajectory(t: Trajectory) -> dict:
-    """Send only the block-tridiagonal part of a trajectory's information matrix.
-
-    The information matrix of a :class:`~fusion.trajectory.Trajectory` is *exactly* block-tridiagonal
-    with ``n x n`` blocks (``n = model.state_dim``): the prior chain puts process factors only on
-    consecutive states (Merino (3.27)); a measurement update touches one diagonal block (Merino
-    (3.29)-(3.30)); fuse/remove/intersect are linear combinations of such matrices; and the Schur
-    complement that marginalises the oldest state (Merino (3.31)-(3.32)) changes only the diagonal
-    block of the next state, because the oldest state is coupled to nothing else. Entries outside
-    the band are therefore exact zeros (``tests/agent/test_wire.py`` checks it after random
-    sequences of operations), and sending ``diag`` and ``off`` loses nothing. Payload::
-
-        {"epoch": int, "n": n, "L": window, "y": (L*n,), "diag": (L, n, n), "off": (L-1, n, n)}
-
-    where ``off[k]`` is the block at (state k+1, state k), below the diagonal. Raises ``ValueError``
-    if the matrix is not block-tridiagonal (a defect upstream: it would be silently truncated)."""
-    n, L = t.model.state_dim, t.model.window
-    Y = np.asarray(t.Y, dtype=np.float64)
-    blocks = Y.reshape(L, n, L, n).transpose(0, 2, 1, 3)  # blocks[i, j] = Y[i*n:(i+1)*n, j*n:(j+1)*n]
-    i, j = np.indices((L, L))
-    outside = blocks[np.abs(i - j) > 1]
-    if outside.size and np.max(np.abs(outside)) > 1e-12 * max(1.0, float(np.max(np.abs(Y)))):
-        raise ValueError("trajectory information matrix is not block-tridiagonal")
-    return {
-        "epoch": int(t.epoch),
-        "n": n,
-        "L": L,
-        "y": np.asarray(t.y, dtype=np.float64),
-        "diag": np.ascontiguousarray(blocks[np.arange(L), np.arange(L)]),
-        "off": np.ascontiguousarray(blocks[np.arange(1, L), np.arange(L - 1)]),
-    }
-
-
-def decode_trajectory(d, model: TrajectoryModel) -> Trajectory:
-    """Validate a trajectory payload against the fleet's ``model`` and rebuild the dense symmetric
-    information matrix (see :func:`encode_trajectory` for why the band is all there is)."""
-    _expect_keys(d, {"epoch", "n", "L", "y", "diag", "off"})
-    if not all(_is_int(d[k]) for k in ("epoch", "n", "L")):
-        raise DecodeError("bad_type", "epoch, n and L must be ints")
-    n, L = model.state_dim, model.window
-    if (d["n"], d["L"]) != (n, L):
-        raise DecodeError("bad_shape", f"n={d['n']}, L={d['L']} but the model has n={n}, L={L}")
-    y, diag, off = (_float_array(d[k], k) for k in ("y", "diag", "off"))
-    if y.shape != (L * n,) or diag.shape != (L, n, n) or off.shape != (L - 1, n, n):
-        raise DecodeError("bad_shape", f"y {y.shape}, diag {diag.shape}, off {off.shape} for n={n}, L={L}")
-    _check_finite(y, diag, off)
-    Y = np.zeros((L * n, L * n))
-    for k in range(L):
-        Y[k * n : (k + 1) * n, k * n : (k + 1) * n] = diag[k]
-    for k in range(L - 1):
-        Y[(k + 1) * n : (k + 2) * n, k * n : (k + 1) * n] = off[k]
-        Y[k * n : (k + 1) * n, (k + 1) * n : (k + 2) * n] = off[k].T
-    return Trajectory(y, _information_matrix(Y), d["epoch"], model)
-
-
-def _expect_keys(d, keys: set[str]) -> None:
-    if not isinstance(d, dict):
-        raise DecodeError("bad_type", f"payload must be a map, got {type(d).__name__}")
-    if set(d) != keys:
-        raise DecodeError("bad_field", f"payload fields {sorted(map(str, d))}, expected {sorted(keys)}")
-
-
-def _float_array(value, name: str) -> np.ndarray:
-    if not isinstance(value, np.ndarray) or value.dtype.kind != "f":
-        raise DecodeError("bad_type", f"{name} must be a float array")
-    return value.astype(np.float64)
-
-
-def _check_finite(*arrays: np.ndarray) -> None:
-    if not all(np.all(np.isfinite(a)) for a in arrays):
-        raise DecodeError("non_finite", "NaN or inf in a belief")
-
-
-def _information_matrix(Y: np.ndarray) -> np.ndarray:
-    """Symmetric to SYMMETRY_RTOL and PSD to ``validation.PSD_RTOL``; returned exactly symmetric."""
-    with np.errstate(all="ignore"):
-        scale = max(1.0, float(np.max(np.abs(Y))))
-        if not np.all(np.abs(Y - Y.T) <= SYMMETRY_RTOL * scale):
-            raise DecodeError("indefinite", "information matrix is not symmetric")
-        Y = 0.5 * (Y + Y.T)
-        try:
-            psd = np.all(np.isfinite(Y)) and validation.is_psd(Y)
-        except np.linalg.LinAlgError:
-            psd = False
-    if not psd:
-        raise DecodeError("indefinite", "information matrix is not positive semi-definite")
-    return Y

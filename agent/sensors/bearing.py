@@ -92,7 +92,7 @@ class GeometricBearingSensor:
 
     def measure(self, t: float, state, truth: list[dict]) -> list[Bearing]:
         """Bearings to the true targets (given as ``{"id", "position"}``) seen at ``t`` from ``state``: a
-        :class:`agent.vehicles.kinematic.VehicleState` (only its position matters) or a camera position (3,)."""
+        :class:`agent.vehicles.base.VehicleState` (only its position matters) or a camera position (3,)."""
         sensor = np.asarray(getattr(state, "position", state), float)
         out = []
         for target in truth:

@@ -6,7 +6,8 @@
 1. **capture** at ``t``: the frame the vehicle's camera sees, rendered from the *true* pose and the
    world truth (:func:`perception.render.render_frame`; targets drawn as red discs or balls, with the
    configured :class:`~perception.degradation.Degradation`), or the next frame of an external OpenCV
-   source (:class:`VideoSource`: a file, a device, a stream) that replaces the synthetic camera;
+   source (:class:`~agent.sensors.video_source.VideoSource`: a file, a device, a stream) that replaces
+   the synthetic camera;
 2. **video quality** D(t) of the frame (thesis 000 §2.4, :class:`~perception.quality.VideoQuality`);
 3. **detection**: colour blobs by default (Ross et al., :class:`~perception.blobs.ColorBlobDetector`) or
    dark blobs (thesis 000 §2.2), optionally through the persistent-object filter; blobs touching the
@@ -44,14 +45,13 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
-from agent.sensors.bearing import Bearing, BearingSensorConfig, GeometricBearingSensor
+from agent.sensors.bearing import Bearing
+from agent.sensors.camera_config import CameraSensorConfig
 from fusion.measurement import los_to_azel
 from perception.blobs import ColorBlobDetector, DarkBlobDetector
 from perception.camera import Intrinsics
-from perception.degradation import FAILURE_MODES, Degradation
 from perception.persistence import PersistentDetector, PersistentObjectFilter
 from perception.pose import CameraMount, CameraPose, Gimbal
 from perception.pose_buffer import PoseBuffer, PoseSample, PoseTooNew, PoseTooOld
@@ -63,10 +63,8 @@ from perception.terrain import FlatTerrain
 
 log = logging.getLogger("skymesh.camera")
 
-__all__ = ["CameraSensorConfig", "CameraSensor", "VideoSource", "sensor_from_config", "DETECTORS"]
+__all__ = ["CameraSensor"]
 
-DETECTORS = ("color", "dark")
-TARGET_SHAPES = ("disc", "sphere")
 PIXEL_STEP = 0.5  # px, central-difference step of the pixel derivative (chosen here)
 POSE_WAIT_MARGIN = 1.0  # s a frame waits for its pose beyond the GPS latency before it is dropped (chosen here)
 LABEL_GATE_PX = 3.0  # px added to 1.5 x the apparent radius when matching a detection to a target (chosen here)
@@ -77,140 +75,6 @@ def _skew(v: np.ndarray) -> np.ndarray:
 
 
 _EX, _EY, _EZ = (_skew(e) for e in np.eye(3))
-
-
-@dataclass(frozen=True)
-class CameraSensorConfig:
-    """``[sensor] kind = "camera"``. Every default is chosen here unless noted."""
-
-    kind = "camera"  # class attribute (not a field): what sensor_config_from_dict dispatched on
-    width: int = 640  # px
-    height: int = 480  # px
-    hfov: float = math.radians(90.0)  # horizontal field of view [rad] (config: hfov_deg)
-    pan: float = 0.0  # gimbal pan [rad] (config: pan_deg)
-    tilt: float = -math.pi / 2  # gimbal tilt [rad]; -90 deg looks straight down (config: tilt_deg)
-    detector: str = "color"  # "color" (Ross et al. HSV blobs) or "dark" (thesis 000 dark blobs)
-    persistence: bool = False  # run detections through the persistent-object filter (thesis 000 §2.3)
-    edge_margin: float = 2.0  # px: blobs whose box comes this close to the border are dropped
-    noise: float = 2.0  # sensor noise [gray levels] (Degradation.noise_sigma)
-    banding_prob: float = 0.0  # probability of a banding episode per frame (thesis 000 §2.2)
-    speckle_rate: float = 0.0  # mean transient blobs per frame
-    failed: str | None = None  # None, "snow", "black" or "banding": a failed video link
-    gps_latency: float = 0.0  # s by which the telemetry pose the sensor gets is late (Ross: 0.43)
-    latency_compensation: bool = False  # store reports gps_latency earlier and pair frames late (Ross §VI.C)
-    pixel_sigma: float = 1.0  # px: detection noise in the bearing covariance
-    attitude_sigma: float = math.radians(0.5)  # rad: attitude noise in the covariance (config: attitude_sigma_deg)
-    attitude_noise: float = 0.0  # rad: white attitude noise injected into the telemetry (config: attitude_noise_deg)
-    target_radius: float = 1.5  # m: targets are drawn this size (a car-sized disc)
-    target_shape: str = "disc"  # "disc" lying on the ground (its centre is the truth point) or "sphere"
-    target_rgb: tuple[int, int, int] = (200, 20, 20)  # red, for the colour detector
-    ground: str = "terrain"  # procedural ground texture: "terrain" or "tiles"
-    pose_buffer: int = 64  # samples kept in the pose buffer
-
-    def __post_init__(self):
-        if self.detector not in DETECTORS:
-            raise ValueError(f"sensor.detector must be one of {DETECTORS}, got {self.detector!r}")
-        if self.target_shape not in TARGET_SHAPES:
-            raise ValueError(f"sensor.target_shape must be one of {TARGET_SHAPES}, got {self.target_shape!r}")
-        if self.failed is not None and self.failed not in FAILURE_MODES:
-            raise ValueError(f"sensor.failed must be none or one of {FAILURE_MODES}, got {self.failed!r}")
-        if self.ground not in ("terrain", "tiles"):
-            raise ValueError(f"sensor.ground must be terrain or tiles, got {self.ground!r}")
-        for name in ("width", "height", "pose_buffer"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < (8 if name != "pose_buffer" else 2):
-                raise ValueError(f"sensor.{name} must be an integer (>= 8 px, >= 2 samples), got {value!r}")
-        checks = {
-            "hfov": 0 < self.hfov < math.pi, "edge_margin": self.edge_margin >= 0, "noise": self.noise >= 0,
-            "banding_prob": 0 <= self.banding_prob <= 1, "speckle_rate": self.speckle_rate >= 0,
-            "gps_latency": self.gps_latency >= 0, "pixel_sigma": self.pixel_sigma > 0,
-            "attitude_sigma": self.attitude_sigma >= 0, "attitude_noise": self.attitude_noise >= 0,
-            "target_radius": self.target_radius > 0, "pan": True, "tilt": True,
-        }
-        for name, ok in checks.items():
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (ok and math.isfinite(value)):
-                raise ValueError(f"sensor.{name} = {value!r} is out of range")
-        if len(self.target_rgb) != 3 or not all(0 <= int(c) <= 255 for c in self.target_rgb):
-            raise ValueError(f"sensor.target_rgb must be three values in 0..255, got {self.target_rgb!r}")
-        Gimbal(self.pan, self.tilt)  # the gimbal accepts the angles (it clamps to its travel)
-
-    @property
-    def intrinsics(self) -> Intrinsics:
-        return Intrinsics.from_fov(self.width, self.height, math.degrees(self.hfov))
-
-    @property
-    def degradation(self) -> Degradation:
-        return Degradation(noise_sigma=self.noise, banding_prob=self.banding_prob, speckle_rate=self.speckle_rate,
-                           failed=self.failed)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> CameraSensorConfig:
-        """From a scenario's ``[sensor]`` table (angles in degrees, named ``*_deg``)."""
-        degrees = {"hfov_deg": "hfov", "pan_deg": "pan", "tilt_deg": "tilt", "attitude_sigma_deg": "attitude_sigma",
-                   "attitude_noise_deg": "attitude_noise"}
-        plain = {"width", "height", "detector", "persistence", "edge_margin", "noise", "banding_prob",
-                 "speckle_rate", "failed", "gps_latency", "latency_compensation", "pixel_sigma", "target_radius",
-                 "target_shape", "target_rgb", "ground", "pose_buffer"}
-        unknown = set(d) - set(degrees) - plain - {"kind"}
-        if unknown:
-            raise ValueError(f"unknown camera sensor settings: {sorted(unknown)}")
-        kwargs = {}
-        for key, value in d.items():
-            if key in degrees:
-                kwargs[degrees[key]] = math.radians(_number(value, key))
-            elif key in ("width", "height", "pose_buffer"):
-                if isinstance(value, bool) or not isinstance(value, int):
-                    raise ValueError(f"sensor.{key} must be an integer, got {value!r}")
-                kwargs[key] = value
-            elif key in ("persistence", "latency_compensation"):
-                if not isinstance(value, bool):
-                    raise ValueError(f"sensor.{key} must be true or false, got {value!r}")
-                kwargs[key] = value
-            elif key == "failed":
-                kwargs[key] = None if value in (None, "none", "") else value
-            elif key == "target_rgb":
-                kwargs[key] = tuple(int(c) for c in value)
-            elif key in ("detector", "target_shape", "ground"):
-                kwargs[key] = value
-            elif key in plain:
-                kwargs[key] = _number(value, key)
-        return cls(**kwargs)
-
-
-def _number(value, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ValueError(f"sensor.{name} must be a number, got {value!r}")
-    return float(value)
-
-
-class VideoSource:
-    """An OpenCV video source (``cv2.VideoCapture``): a file path, a device index (``"0"``) or a stream
-    URL. Opening a source that does not open is a :class:`ValueError`; :meth:`read` returns the next
-    frame as RGB uint8, or ``None`` when no frame could be read or decoded (counted by the sensor)."""
-
-    def __init__(self, source: str | int):
-        self.name = str(source)
-        spec = int(source) if isinstance(source, str) and source.strip().isdigit() else source
-        self.capture = cv2.VideoCapture(spec)
-        if not self.capture.isOpened():
-            self.capture.release()
-            raise ValueError(f"cannot open camera source {self.name!r} (not a readable video file, device or stream)")
-        self.size = (int(self.capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self.capture.get(cv2.CAP_PROP_FRAME_HEIGHT)))
-
-    def read(self) -> np.ndarray | None:
-        try:
-            ok, frame = self.capture.read()
-        except cv2.error:
-            return None
-        if not ok or frame is None:
-            return None
-        if frame.ndim == 3 and frame.shape[2] == 3:
-            return cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
-        return frame
-
-    def close(self) -> None:
-        self.capture.release()
 
 
 @dataclass
@@ -238,7 +102,8 @@ class CameraSensor:
     """The camera pipeline behind the sensor interface ``measure(t, state, truth) -> [Bearing]``.
 
     ``terrain`` is the world's ground (drawn under the targets); ``source`` an optional
-    :class:`VideoSource` (or anything with ``read()`` and ``close()``) that replaces the renderer."""
+    :class:`~agent.sensors.video_source.VideoSource` (or anything with ``read()`` and ``close()``) that
+    replaces the renderer."""
 
     def __init__(self, config: CameraSensorConfig, seed: int, terrain=None, source=None):
         self.config = config
@@ -275,7 +140,7 @@ class CameraSensor:
 
     # -- the sensor interface ---------------------------------------------------------------------
     def measure(self, t: float, state, truth: list[dict]) -> list[Bearing]:
-        """Capture a frame at ``t`` from the vehicle ``state`` (a :class:`agent.vehicles.kinematic.VehicleState`),
+        """Capture a frame at ``t`` from the vehicle ``state`` (a :class:`agent.vehicles.base.VehicleState`),
         detect, and return the bearings whose pose is known (this frame's, or earlier frames' that waited
         for a late pose). Never raises on bad frames or poses: they are counted in :attr:`outcomes`."""
         self._telemetry(t, state)
@@ -460,25 +325,3 @@ class CameraSensor:
         R = 0.5 * (R + R.T) + 1e-12 * np.eye(2)
         centre = pose.position + R_nb @ self.mount.offset
         return Bearing(t, centre, azel, R, truth_id)
-
-
-def sensor_from_config(config, seed: int, terrain=None, source=None):
-    """The agent's sensor for its scenario's ``[sensor]`` config: the camera pipeline for a
-    :class:`CameraSensorConfig` or an external ``source``, else the geometric bearing sensor."""
-    if source is not None and not isinstance(config, CameraSensorConfig):
-        config = CameraSensorConfig()  # an external camera with the default intrinsics and pose
-    if isinstance(config, CameraSensorConfig):
-        return CameraSensor(config, seed, terrain, source)
-    if isinstance(config, BearingSensorConfig):
-        return GeometricBearingSensor(config, seed)
-    raise TypeError(f"unknown sensor config {type(config).__name__}")
-
-
-def sensor_config_from_dict(d: dict):
-    """``[sensor]``: ``kind = "bearing"`` (default, :class:`BearingSensorConfig`) or ``"camera"``."""
-    kind = d.get("kind", "bearing")
-    if kind == "camera":
-        return CameraSensorConfig.from_dict(d)
-    if kind == "bearing":
-        return BearingSensorConfig.from_dict(d)
-    raise ValueError(f"sensor.kind must be bearing or camera, got {kind!r}")

@@ -17,7 +17,7 @@ drifts of the machine hit all alike); the ratios agent / bare are the result:
   queue filled by Zenoh's callback thread), busy-polled with a ``POLL_SLEEP_S`` sleep when the queue is
   empty (the agent drains once per step; polling is what it would take to react at once), and the wire
   format: a ``track`` :class:`agent.net.wire.Envelope` carrying one real trajectory belief
-  (``TrajectoryModel(ConstantVelocity(3, 3.0), 0.2, 8)``, ``wire.encode_trajectory``). Each side
+  (``TrajectoryModel(ConstantVelocity(3, 3.0), 0.2, 8)``, ``gaussian_codec.encode_trajectory``). Each side
   encodes (``encode_trajectory`` + ``wire.encode``) what it sends and decodes and validates
   (``wire.decode`` + ``decode_trajectory``: shapes, finiteness, symmetric PSD information matrix) what
   it receives, as an agent does; the echo acknowledges the ping's sequence number in ``acks``.
@@ -104,22 +104,22 @@ class Codec:
     model: object
 
     def encode(self, traj, seq: int, stamp: float, acked: int | None) -> bytes:
-        from agent.net import wire
+        from agent.net import gaussian_codec, wire
 
-        payload = {"tracks": [{"id": 1, "belief": wire.encode_trajectory(traj), "last_measured": stamp}]}
+        payload = {"tracks": [{"id": 1, "belief": gaussian_codec.encode_trajectory(traj), "last_measured": stamp}]}
         acks = {} if acked is None else {self.peer: acked}
         return wire.encode(wire.Envelope(kind="track", origin=self.origin, seq=seq, stamp=stamp, acks=acks,
                                          payload=payload))
 
     def decode(self, data: bytes):
         """Returns ``(envelope, trajectory)``; raises ``wire.DecodeError`` on anything invalid."""
-        from agent.net import wire
+        from agent.net import gaussian_codec, wire
 
         env = wire.decode(data, expected_origin=self.peer)
         tracks = env.payload.get("tracks")
         if not isinstance(tracks, list) or len(tracks) != 1 or not isinstance(tracks[0], dict):
             raise wire.DecodeError("bad_field", "expected one track")
-        return env, wire.decode_trajectory(tracks[0].get("belief"), self.model)
+        return env, gaussian_codec.decode_trajectory(tracks[0].get("belief"), self.model)
 
 
 class _Keys:

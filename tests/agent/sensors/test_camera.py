@@ -15,13 +15,14 @@ import numpy as np
 import pytest
 
 from agent.agent import Agent
-from agent.config import AgentScenario
 from agent.net import wire
 from agent.net.bus import InMemoryBus
 from agent.net.keys import Keys
 from agent.sensors.bearing import BearingSensorConfig, GeometricBearingSensor
-from agent.sensors.camera import CameraSensor, CameraSensorConfig, VideoSource, sensor_config_from_dict
-from agent.vehicles.kinematic import VehicleState
+from agent.sensors.camera import CameraSensor
+from agent.sensors.camera_config import CameraSensorConfig
+from agent.sensors.video_source import VideoSource
+from agent.vehicles.base import VehicleState
 from fusion.measurement import azel_to_los
 from mesh_sim.cli import main as skymesh
 from mesh_sim.lockstep import agent_subscriptions, run_lockstep
@@ -44,39 +45,6 @@ def ground_point(bearing) -> np.ndarray:
     """Where the bearing's ray meets the flat ground z = 0."""
     los = azel_to_los(bearing.azel)
     return bearing.sensor + (-bearing.sensor[2] / los[2]) * los
-
-
-# ----------------------------------------------------------------------------------------------- config
-
-
-def test_sensor_config_kinds():
-    assert isinstance(sensor_config_from_dict({}), BearingSensorConfig)
-    assert isinstance(sensor_config_from_dict({"kind": "bearing", "sigma_deg": 2.0}), BearingSensorConfig)
-    cam = sensor_config_from_dict({"kind": "camera", "hfov_deg": 60.0, "tilt_deg": -80.0, "gps_latency": 0.43,
-                                   "latency_compensation": True, "failed": "none", "detector": "dark"})
-    assert isinstance(cam, CameraSensorConfig)
-    assert cam.hfov == pytest.approx(D(60.0)) and cam.tilt == pytest.approx(D(-80.0)) and cam.failed is None
-    assert cam.gps_latency == 0.43 and cam.latency_compensation and cam.detector == "dark"
-    for bad, match in (({"kind": "lidar"}, "bearing or camera"), ({"kind": "camera", "hfov": 60}, "hfov"),
-                       ({"kind": "camera", "detector": "yolo"}, "detector"),
-                       ({"kind": "camera", "gps_latency": -1.0}, "gps_latency"),
-                       ({"kind": "camera", "latency_compensation": 1}, "true or false"),
-                       ({"kind": "camera", "failed": "smoke"}, "failed")):
-        with pytest.raises(ValueError, match=match):
-            sensor_config_from_dict(bad)
-    scenario = AgentScenario.from_dict({"sensor": {"kind": "camera", "width": 320, "height": 240}})
-    assert isinstance(scenario.sensor, CameraSensorConfig) and scenario.sensor.width == 320
-
-
-def test_a_sensor_override_of_another_kind_replaces_the_section():
-    # default.toml has camera settings; switching the kind must not carry them over
-    bearing = load("default", sensor={"kind": "bearing", "range": 123.0}).agent.sensor
-    assert isinstance(bearing, BearingSensorConfig) and bearing.range == 123.0
-    camera = load("default", sensor={"width": 320, "height": 240}).agent.sensor  # same kind: merged
-    assert isinstance(camera, CameraSensorConfig) and (camera.width, camera.height) == (320, 240)
-    assert camera.hfov == pytest.approx(math.radians(90.0))  # the rest of the section is kept
-    assert isinstance(load("camera", sensor={"kind": "bearing"}).agent.sensor, BearingSensorConfig)
-    assert load("camera", sensor={"gps_latency": 0.43}).agent.sensor.width == 640
 
 
 # --------------------------------------------------------------------------------------------- geometry
