@@ -21,6 +21,7 @@ from agent.net.sending import SendConfig
 from agent.sensors.bearing import BearingSensorConfig
 from agent.sensors.camera_config import CameraSensorConfig
 from agent.sensors.registry import sensor_config_from_dict
+from tasking.registry import check_tasking
 
 #: Top-level keys that the world reads; the agent accepts and ignores them.
 WORLD_KEYS = frozenset({"targets", "radio", "description", "fire", "decoys"})
@@ -71,6 +72,7 @@ class AgentScenario:
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
         if int(self.agents) != self.agents or self.agents < 1:
             raise ValueError(f"agents must be a positive integer, got {self.agents!r}")
+        check_tasking(self.tasking, frozenset({"track"} | ({"grid"} if self.grid is not None else set())))
 
     @property
     def step(self) -> float:

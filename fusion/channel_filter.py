@@ -2,9 +2,8 @@
 
 Merino (2.26)-(2.28), Alg. 3.4 and (3.39)-(3.42) (after Bourgault & Durrant-Whyte, 2004): when node
 ``i`` receives neighbour ``j``'s belief it adds ``bel_j - bel_ij``, where ``bel_ij`` is the information
-the two already share. This module is generic: it works for any belief that implements the algebra
-``fuse``, ``remove``, ``intersect``/``scaled``, an ``epoch`` (``None`` for timeless beliefs) and
-``advanced_to(epoch)`` — Gaussians, trajectories, and later grids.
+the two already share. This module is generic: it works for any :class:`fusion.belief.Belief` (``fuse``,
+``remove``, ``epoch``, ``advanced_to``) with an intersection rule — Gaussians, trajectories and grids.
 
 **Acknowledged common information.** Merino's bookkeeping ("on send, ``bel_ij = bel_i``") assumes the
 message arrives. Here a node assumes a neighbour holds only what the neighbour has *acknowledged*: every
@@ -41,10 +40,11 @@ baseline), so it is not done; :meth:`ChannelFilter.reset` restarts a channel who
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable, Hashable
+from collections.abc import Hashable
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+from fusion.belief import Belief, IntersectRule
 from fusion.covariance_intersection import ci
 
 
@@ -59,14 +59,14 @@ class Policy(StrEnum):
 class Received:
     """The outcome of one receive: the fused belief, how it was fused, and why (for fallbacks)."""
 
-    fused: object
+    fused: Belief
     method: str  # "exact", "ci", "naive" or "stale"
     reason: str | None = None
 
 
 @dataclass
 class _Channel:
-    inbound: object  # B: neighbour-side information held here (includes the common prior)
+    inbound: Belief  # B: neighbour-side information held here (includes the common prior)
     opened_after: int | None  # the last seq sent before this channel existed (B was the prior then)
     inbound_at_send: OrderedDict = field(default_factory=OrderedDict)  # seq -> B when seq was sent
     synchronized: bool = True
@@ -82,9 +82,9 @@ class ChannelFilter:
 
     def __init__(
         self,
-        prior,
+        prior: Belief,
         policy: Policy | str = Policy.HYBRID,
-        intersect: Callable | None = None,
+        intersect: IntersectRule | None = None,
         history: int = 64,
     ):
         self.prior = prior

@@ -123,6 +123,13 @@ def _bernoulli_kl(l_p: np.ndarray, l_q: np.ndarray) -> np.ndarray:
     return p * (log_expit(l_p) - log_expit(l_q)) + (1.0 - p) * (log_expit(-l_p) - log_expit(-l_q))
 
 
+def beta_entropy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Differential entropy of ``Beta(a, b)`` per cell (nats): ``ln B(a, b) - (a-1) ψ(a) - (b-1) ψ(b)
+    + (a+b-2) ψ(a+b)`` (the thesis leaves the formula out, Merino §4.3.1 / §4.7). No checks: the caller
+    gives positive counts."""
+    return betaln(a, b) - (a - 1.0) * digamma(a) - (b - 1.0) * digamma(b) + (a + b - 2.0) * digamma(a + b)
+
+
 class _Grid:
     """What both grid types share: geometry checks and the static-belief protocol."""
 
@@ -301,8 +308,7 @@ class BetaGrid(_Grid):
     def entropy(self) -> np.ndarray:
         """Differential entropy of each cell's Beta (nats): ``ln B(a, b) - (a-1) digamma(a) - (b-1) digamma(b)
         + (a+b-2) digamma(a+b)`` (the thesis leaves the formula out, §4.3.1)."""
-        a, b = self.shape_parameters()
-        return betaln(a, b) - (a - 1.0) * digamma(a) - (b - 1.0) * digamma(b) + (a + b - 2.0) * digamma(a + b)
+        return beta_entropy(*self.shape_parameters())
 
     def kl_divergence(self, other: BetaGrid) -> float:
         """(4.25) between the mean cell probabilities, summed over cells: ``D(self || other)``."""

@@ -14,8 +14,8 @@ import numpy as np
 
 from agent.beliefs.grid_config import GridConfig
 from agent.beliefs.grid_exchange import GridReceiver
-from agent.beliefs.grids import GridBeliefs, grid_geometry
 from agent.net import wire
+from fusion.grid_layers import GridLayers
 from mesh_sim.fire_scoring import roc
 
 __all__ = ["GridOracle", "EVAL_PERIOD", "grid_extent"]
@@ -26,8 +26,8 @@ EVAL_PERIOD = 2.0  # s between KL samples (chosen here)
 class GridOracle:
     def __init__(self, config: GridConfig, area: tuple[float, float, float, float], terrain):
         self.config = config
-        self.geometry = grid_geometry(area, config.cell, terrain)
-        self.beliefs = GridBeliefs(config.belief, self.geometry)
+        self.geometry = config.geometry(area, terrain)
+        self.beliefs = GridLayers(config.belief, self.geometry)
         self.central = self.beliefs.uniform()
         self.receiver = GridReceiver(self.geometry.shape, self.beliefs.layers)
         self.agents: dict[str, object] = {}  # agent -> its latest grid as broadcast

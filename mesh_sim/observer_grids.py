@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 
 from agent.beliefs.grid_exchange import GridReceiver
-from agent.beliefs.grids import GridBeliefs
 from agent.net import wire
 from agent.net.fire_truth import decode_fire
 from fusion.grid_geometry import GridGeometry
+from fusion.grid_layers import GridLayers
 
 COLOURMAP = "inferno"  # chosen here
 TRUTH_COLOURS = np.array([[40, 40, 40], [255, 90, 0], [110, 70, 60]], np.uint8)  # unburnt, burning, burnt
@@ -29,7 +29,7 @@ def _lut(name: str = COLOURMAP) -> np.ndarray:
 
 class GridImages:
     def __init__(self):
-        self._decoders: dict[tuple, tuple[GridBeliefs, object]] = {}
+        self._decoders: dict[tuple, tuple[GridLayers, object]] = {}
         self._lut = _lut()
 
     def agent_image(self, origin: str, seq: int, payload: dict) -> np.ndarray:
@@ -42,7 +42,7 @@ class GridImages:
             raise wire.DecodeError("grid_geometry", str(err)) from None
         key = (payload["belief"], repr(geometry))
         if key not in self._decoders:
-            beliefs = GridBeliefs(payload["belief"], geometry)
+            beliefs = GridLayers(payload["belief"], geometry)
             self._decoders[key] = (beliefs, GridReceiver(geometry.shape, beliefs.layers))
         beliefs, receiver = self._decoders[key]
         layers = receiver.decode(origin, seq, payload.get("grid"))

@@ -22,7 +22,6 @@ from agent.beliefs.tracks import FUTURE_EPOCHS
 from agent.evaluation import TrackEvaluator
 from agent.net import wire
 from agent.net.keys import Keys
-from agent.net.zenoh_transport import ZenohTransport, load_config
 from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
 from agent.sensors.bearing import Bearing
 from mesh_sim.fire import FireWorld
@@ -174,6 +173,8 @@ def main(argv=None) -> int:
     p.add_argument("--epoch-file", help="wait for the launcher to write the start time here (instead of --epoch)")
     p.add_argument("--ready-file", help="created once this process is ready (with --epoch-file)")
     args = p.parse_args(argv)
+    from agent.net.zenoh_transport import ZenohTransport, load_config  # the live process only: lockstep needs no Zenoh
+
     try:
         scenario = load(args.scenario)
         config = load_config(args.connect, args.zenoh_config)

@@ -39,12 +39,15 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from numbers import Integral, Real
 
 import numpy as np
-from scipy.special import betaln, digamma, entr, gammaln
+from scipy.special import betaln, entr, gammaln
 
+from fusion.grid import beta_entropy as grid_beta_entropy
+from tasking.base import VehicleStateLike
 from tasking.orbit import Goal, goto_goal
 from tasking.search import check_area
 
@@ -99,8 +102,7 @@ def bernoulli_entropy(p) -> np.ndarray:
 
 def beta_entropy(alpha, beta) -> np.ndarray:
     """Differential entropy of ``Beta(alpha, beta)`` in nats (see the module docstring)."""
-    a, b = _counts(alpha, beta)
-    return betaln(a, b) - (a - 1.0) * digamma(a) - (b - 1.0) * digamma(b) + (a + b - 2.0) * digamma(a + b)
+    return grid_beta_entropy(*_counts(alpha, beta))
 
 
 def _counts(alpha, beta) -> tuple[np.ndarray, np.ndarray]:
@@ -226,7 +228,12 @@ class EntropyPlanner:
         a, b = beta[0][near], beta[1][near]
         return np.stack([beta_expected_entropy_reduction(a, b, n) for n in range(c.horizon + 1)])
 
-    def plan(self, position, probability, centres, beta: tuple[np.ndarray, np.ndarray] | None = None) -> Goal:
+    def plan(self, state: VehicleStateLike, views: Mapping[str, object]) -> Goal:
+        """The planner seam (:class:`tasking.base.Planner`): explore the ``"grid"`` view."""
+        grid = views["grid"]
+        return self.goal_for(state.position, grid.probability, grid.centres, grid.beta)
+
+    def goal_for(self, position, probability, centres, beta: tuple[np.ndarray, np.ndarray] | None = None) -> Goal:
         """The next goal from the vehicle's NED ``position`` (north, east[, down]), the grid's per-cell
         fire ``probability`` (rows, cols), the cells' (north, east) ``centres`` (rows, cols, 2) and,
         for the Beta variant, ``beta = (alpha, beta)`` counts (rows, cols). Candidates leaving the area

@@ -5,12 +5,12 @@ Behaviour of :class:`PlaceholderPlanner`, called once per agent cycle (DESIGN §
 - **No confirmed track** -> *search*. With ``search="lawnmower"`` agent ``k`` of ``N`` sweeps strip
   ``k`` of the area with a boustrophedon path (:func:`tasking.search.lawnmower_waypoints`), cycling
   forever, so the team covers the area without coordination. With ``search="patrol"`` it makes random
-  point-to-point moves inside the whole area (Pierri et al., spec 004 §2.9), with a generator seeded
+  point-to-point moves inside the whole area (Andreetto et al., spec 004 §2.9), with a generator seeded
   from ``(seed, agent_index)`` so agents differ but a run is reproducible.
 - **At least one confirmed track** -> *orbit*. The agent picks a track with
   :func:`tasking.orbit.choose_target` (sort the fused estimates by (north, east), take
   ``agent_index mod M``), and circles its estimated position at ``orbit_radius``. Because the tracks
-  are the agent's fused beliefs, this also covers Pierri's rendezvous case 1: an agent that never saw
+  are the agent's fused beliefs, this also covers Andreetto et al.'s rendezvous case 1: an agent that never saw
   the target but received a neighbour's estimate goes to the circle. The orbit centre follows the
   estimate every cycle.
 - **Tracks disappear** -> back to *search*, resuming the search where it was left (the same lawnmower
@@ -20,18 +20,19 @@ Not here yet (full tasking arrives later): equal spacing on the circle (spec 004
 detection/tracking phases and dwell times (spec 000 §2.10), and the potential-field collision layer
 (spec 000 §2.9). Agents sharing a target orbit the same circle in the same direction.
 
-The planner returns a :class:`tasking.orbit.Goal` (plain data); ``agent.vehicles.kinematic.goal_to_setpoint``
+The planner returns a :class:`tasking.orbit.Goal` (plain data); ``agent.vehicles.base.goal_to_setpoint``
 turns it into a vehicle setpoint. ``altitude`` is metres above the local origin (positive up).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 
 import numpy as np
 
 from fusion.validation import as_vector
+from tasking.base import VehicleStateLike
 from tasking.orbit import Goal, choose_target, goto_goal, orbit_setpoint
 from tasking.search import Area, RandomPatrol, WaypointFollower, check_area, lawnmower_waypoints
 
@@ -44,7 +45,7 @@ class PlaceholderPlanner:
     """Search its lane (or patrol) while there is no confirmed track, otherwise orbit a chosen target.
 
     Parameters (defaults chosen here): ``spacing`` is the lawnmower leg spacing (twice the sensor
-    footprint half-width), ``orbit_radius`` the circle radius around a target (15 m is Pierri's
+    footprint half-width), ``orbit_radius`` the circle radius around a target (15 m is Andreetto et al.'s
     rendezvous value, spec 004 §3), ``acceptance_radius`` the distance at which a search waypoint
     counts as reached (default ``spacing / 2``; a fixed wing needs at least its loiter radius),
     ``speed`` an optional speed limit passed with every goal.
@@ -119,7 +120,11 @@ class PlaceholderPlanner:
             self._patrol_point = self._patrol.next_point()
         return goto_goal(self._patrol_point, self.altitude, self.speed)
 
-    def plan(self, vehicle_position, confirmed_tracks: Sequence[tuple[Hashable, object]]) -> Goal:
+    def plan(self, state: VehicleStateLike, views: Mapping[str, object]) -> Goal:
+        """The planner seam (:class:`tasking.base.Planner`): orbit or search from the ``"track"`` view."""
+        return self.goal_for(state.position, views["track"].positions)
+
+    def goal_for(self, vehicle_position, confirmed_tracks: Sequence[tuple[Hashable, object]]) -> Goal:
         """The goal for this cycle, from the vehicle's NED position and the confirmed ``(track_id, position)``
         pairs (fused estimates, north/east first)."""
         position = as_vector(vehicle_position, "vehicle_position", 3)

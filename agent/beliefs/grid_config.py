@@ -9,9 +9,10 @@ import numpy as np
 
 from agent.sensors.fire_camera import FireCameraConfig
 from fusion.channel_filter import Policy
+from fusion.grid_geometry import GridGeometry
+from fusion.grid_layers import BELIEFS
 from perception.grid_likelihood import DetectionModel, PoseNoise
 
-BELIEFS = ("logodds", "beta")
 INTERSECTS = ("chernoff", "max", "half")
 
 
@@ -50,6 +51,12 @@ class GridConfig:
             raise ValueError(f"grid.plan_steps must be a positive integer, got {self.plan_steps!r}")
         if isinstance(self.keyframe_every, bool) or not isinstance(self.keyframe_every, int) or self.keyframe_every < 1:
             raise ValueError(f"grid.keyframe_every must be a positive integer, got {self.keyframe_every!r}")
+
+    def geometry(self, area: tuple[float, float, float, float], terrain) -> GridGeometry:
+        """The grid over the scenario ``area`` (north min, max, east min, max), cell centres on the (flat)
+        ground of ``terrain``."""
+        level = getattr(terrain, "level", None)
+        return GridGeometry.covering(area[:2], area[2:], self.cell, height=-(level or 0.0))
 
     @classmethod
     def from_dict(cls, d: dict) -> GridConfig:

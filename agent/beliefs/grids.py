@@ -1,4 +1,5 @@
-"""The agent's fire map: a certainty grid built from its thermal camera and fused with its neighbours'.
+"""The ``"grid"`` belief exchange — the agent's fire map: a certainty grid built from its thermal camera
+and fused with its neighbours'.
 
 Merino Alg. 4.3 (log-odds) / Alg. 4.5 (Beta), with the generic channel filter of
 :mod:`fusion.channel_filter` in place of the thesis's "on send, ``l_ij = l_i``": a neighbour is assumed
@@ -6,12 +7,14 @@ to hold only what it acknowledged. On a tree the map equals the centralized one;
 on a non-bridge link, or ``ci``) the grids are combined by a conservative rule instead — the per-cell
 weighted log-odds at the Chernoff point, or Merino's max rules (4.5)/(4.39).
 
-* **sense**: one thermal frame -> per-cell evidence (:class:`agent.sensors.fire_camera.FireCamera`) -> the local
-  update (Alg. 4.2 / Alg. 4.4 lines 5-6);
+* **absorb**: one thermal frame -> per-cell evidence (:class:`agent.sensors.fire_camera.ThermalSensor`, the
+  sensor this belief brings to the agent) -> the local update (Alg. 4.2 / Alg. 4.4 lines 5-6); the frame's
+  evidence also goes to the simulator's centralized map (simulation only);
 * **send**: every ``period`` a grid message, a delta against what every neighbour acknowledged
   (:mod:`agent.beliefs.grid_exchange`); the channel filter records the *quantized* grid as sent, exactly what
   the receivers rebuild;
 * **receive**: decode (geometry and belief type must match ours), fuse through the channel filter;
+* **view**: the map the explorer plans on (:class:`tasking.base.MapView`);
 * **alarms**: every ``alarm_period`` the fused grid is thresholded into Gaussian alarms (Merino (4.20),
   :func:`fusion.grid_alarms.extract_alarms`) with their class probability — the hand-off to the
   information-filter layer of Merino's hybrid scheme (Ch. 8). They are re-extracted from the grid each
@@ -28,77 +31,67 @@ from agent.beliefs.grid_config import GridConfig
 from agent.beliefs.grid_exchange import HISTORY, GridReceiver, GridSender
 from agent.net import wire
 from agent.net.grid_codec import encoded_size
-from agent.sensors.fire_camera import FireCamera
+from agent.plugins import Observations, Outbox, Outgoing
+from agent.sensors.fire_camera import FireCamera, ThermalSensor
+from agent.sensors.truth import TruthSnapshot
 from fusion.channel_filter import ChannelFilter
 from fusion.fire_spread import FireSpreadModel
-from fusion.grid import BetaGrid, LogOddsGrid
 from fusion.grid_alarms import Alarm, extract_alarms
 from fusion.grid_geometry import GridGeometry
 from fusion.grid_intersect import chernoff_intersect, half_intersect, max_intersect
+from fusion.grid_layers import GridLayers
+from tasking.base import MapView
 
 INTERSECT_RULES = {"chernoff": chernoff_intersect, "max": max_intersect, "half": half_intersect}
 
 
-def grid_geometry(area: tuple[float, float, float, float], cell: float, terrain) -> GridGeometry:
-    """The grid over the scenario area, cell centres on the (flat) ground."""
-    level = getattr(terrain, "level", None)
-    return GridGeometry.covering(area[:2], area[2:], cell, height=-(level or 0.0))
-
-
-class GridBeliefs:
-    """Layers <-> grid beliefs of one type (what travels is ``(L, rows, cols)`` float arrays)."""
-
-    def __init__(self, belief: str, geometry: GridGeometry):
-        self.belief = belief
-        self.geometry = geometry
-        self.layers = 1 if belief == "logodds" else 2
-
-    def uniform(self):
-        return LogOddsGrid.uniform(self.geometry) if self.belief == "logodds" else BetaGrid.uniform(self.geometry)
-
-    def to_layers(self, grid) -> np.ndarray:
-        return grid.evidence[None] if self.belief == "logodds" else np.stack([grid.alpha, grid.beta])
-
-    def from_layers(self, layers: np.ndarray):
-        if self.belief == "logodds":
-            return LogOddsGrid(self.geometry, layers[0])
-        return BetaGrid(self.geometry, layers[0], layers[1])
-
-
-class FireMapper:
+class GridExchange:
     """One agent's fire map: local evidence, exchange with neighbours through channel filters, alarms."""
 
-    def __init__(self, agent_id: str, config: GridConfig, area: tuple[float, float, float, float], terrain,
-                 seed: int):
-        self.id = agent_id
+    kind = "grid"
+
+    def __init__(self, me: str, config: GridConfig, area: tuple[float, float, float, float], terrain, seed: int,
+                 outbox: Outbox):
+        self.me = me
         self.config = config
-        self.terrain = terrain
-        self.geometry = grid_geometry(area, config.cell, terrain)
-        self.beliefs = GridBeliefs(config.belief, self.geometry)
+        self.outbox = outbox
+        self.geometry = config.geometry(area, terrain)
+        self.beliefs = GridLayers(config.belief, self.geometry)
         self.grid = self.beliefs.uniform()
         # the channel filters remember as many sent grids as the exchange does: a whole grid per message
         self.channels = ChannelFilter(self.beliefs.uniform(), config.policy, INTERSECT_RULES[config.intersect],
                                       history=HISTORY)
         self.sender = GridSender(config.keyframe_every, config.delta)
         self.receiver = GridReceiver(self.geometry.shape, self.beliefs.layers)
-        self.camera = FireCamera(config.camera, config.detection, config.pose_noise, seed)
-        self.cells_ned = self.geometry.centres_ned()
+        self.sensor = ThermalSensor(FireCamera(config.camera, config.detection, config.pose_noise, seed),
+                                    self.geometry.centres_ned(), self.geometry.cell, terrain)
         self.alarms: list[Alarm] = []
         self._next_send = 0.0
         self._next_alarms = 0.0
+        self._quantized: np.ndarray | None = None  # the layers of the message on offer, as receivers rebuild them
         self.fusions: Counter = Counter()  # method -> grids fused
         self.message_bytes: list[int] = []  # payload bytes of each grid message sent
         self.keyframes = 0
+        self.grids_thinned = 0
+
+    def sensors(self) -> list[ThermalSensor]:
+        """The sensor this belief brings: the down-looking thermal camera of ``[grid]``."""
+        return [self.sensor]
+
+    def planning_hints(self) -> dict:
+        """A planner on this map scores looks with the thermal camera's ``(P_D, P_F)`` (Merino (4.23))."""
+        return {"detection": (self.config.detection.pd, self.config.detection.pf)}
 
     # -- local evidence ---------------------------------------------------------------------------
-    def sense(self, state, fires: list, decoys: list):
-        """One frame: update the local grid; returns the evidence (for the simulator's centralized map)."""
-        ev = self.camera.evidence(state, fires, decoys, self.cells_ned, self.geometry.cell, self.terrain)
+    def absorb(self, t: float, observations: Observations) -> None:
+        """One frame's cell evidence updates the local grid and goes to the simulator's centralized map."""
+        ev = observations["fire_evidence"]
         if self.config.belief == "logodds":
             self.grid = self.grid.update_cells(ev.index, ev.llr)
         else:
             self.grid = self.grid.update_cells(ev.index, ev.m, ev.n)
-        return ev
+        self.outbox.to_simulator("grid_evidence", t, {"index": ev.index.astype(np.int32), "llr": ev.llr,
+                                                      "m": ev.m, "n": ev.n})
 
     def probability(self) -> np.ndarray:
         return self.grid.probability()
@@ -124,29 +117,36 @@ class FireMapper:
         return self.alarms
 
     # -- exchange ---------------------------------------------------------------------------------
-    def due(self, t: float) -> bool:
+    def _due(self, t: float) -> bool:
         if t + 1e-9 < self._next_send:
             return False
         self._next_send = t + self.config.period
         return True
 
-    def outgoing(self, neighbours: list[str]) -> tuple[dict, np.ndarray]:
-        """The grid message payload for the current neighbours and the quantized layers it carries."""
-        codec, quantized = self.sender.encode(self.beliefs.to_layers(self.grid), neighbours)
-        payload = {"geometry": self.geometry.to_dict(), "belief": self.config.belief, "grid": codec,
-                   "acks": self.receiver.acks()}
-        return payload, quantized
+    def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
+        """Every ``period``: the grid as a delta against what every current neighbour acknowledged (the
+        alarms are refreshed first, every ``alarm_period``)."""
+        self.update_alarms(t)
+        if not self._due(t):
+            return None
+        codec, self._quantized = self.sender.encode(self.beliefs.to_layers(self.grid), neighbours)
+        return Outgoing({"geometry": self.geometry.to_dict(), "belief": self.config.belief, "grid": codec,
+                         "acks": self.receiver.acks()})
 
-    def sent(self, seq: int, payload: dict, quantized: np.ndarray) -> None:
+    def sent(self, seq: int, message: Outgoing) -> None:
         """Message ``seq`` left: the channel filters now assume neighbours that acknowledge it hold it."""
-        self.sender.sent_as(seq, quantized, payload["grid"])
-        self.channels.on_send(self.beliefs.from_layers(quantized), seq)
-        self.message_bytes.append(encoded_size(payload["grid"]))
-        self.keyframes += payload["grid"].get("mode") == "key"
+        codec = message.payload["grid"]
+        self.sender.sent_as(seq, self._quantized, codec)
+        self.channels.on_send(self.beliefs.from_layers(self._quantized), seq)
+        self.message_bytes.append(encoded_size(codec))
+        self.keyframes += codec.get("mode") == "key"
 
-    def receive(self, origin: str, seq: int, payload: dict, tree_edge: bool) -> str:
-        """Decode and fuse a neighbour's grid message; returns the fusion method. Raises
-        :class:`agent.net.wire.DecodeError` on a bad message (nothing is changed then)."""
+    def thinned(self, message: Outgoing) -> None:
+        self.grids_thinned += 1
+
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool, t: float) -> list[str]:
+        """Decode and fuse a neighbour's grid message. Raises :class:`agent.net.wire.DecodeError` on a bad
+        message (nothing is changed then)."""
         if not isinstance(payload, dict) or payload.get("belief") != self.config.belief:
             raise wire.DecodeError("grid_geometry", f"expected a {self.config.belief} grid")
         try:
@@ -161,21 +161,31 @@ class FireMapper:
             received = self.beliefs.from_layers(layers)
         except ValueError as err:  # e.g. negative Beta counts
             raise wire.DecodeError("grid_bad_values", str(err)) from None
-        ours = acks.get(self.id)
+        ours = acks.get(self.me)
         if ours is not None:
             self.sender.acknowledge(origin, ours)
         out = self.channels.on_receive(origin, self.grid, received, ours, seq, tree_edge)
         self.grid = out.fused
         self.fusions[out.method] += 1
-        return out.method
+        return [f"grid_{out.method}"]
 
-    # -- results ----------------------------------------------------------------------------------
+    # -- views and results ------------------------------------------------------------------------
+    def view(self) -> MapView:
+        beta = self.grid.shape_parameters() if self.config.belief == "beta" else None
+        return MapView(self.planning_probability(), self.geometry.centres(), beta)
+
+    def telemetry(self) -> dict:
+        return {"alarms": [{"mean": a.mean, "cov": a.cov, "probability": a.probability} for a in self.alarms]}
+
+    def evaluate(self, t: float, truth: TruthSnapshot) -> None:
+        """The map is scored by the simulator against its centralized map (:mod:`mesh_sim.grid_oracle`)."""
+
     def metrics(self) -> dict:
         sizes = np.asarray(self.message_bytes, float)
-        return {
+        return {"grid": {
             "belief": self.config.belief,
             "shape": list(self.geometry.shape),
-            "frames": self.camera.frames,
+            **self.sensor.metrics(),
             "grid_messages": int(sizes.size),
             "grid_keyframes": int(self.keyframes),
             "grid_bytes": int(sizes.sum()),
@@ -184,4 +194,5 @@ class FireMapper:
             "grid_fusions": dict(self.fusions),
             "alarms": [{"mean": a.mean.tolist(), "cov": a.cov.tolist(), "probability": a.probability,
                         "cells": a.cells} for a in self.alarms],
-        }
+            "thinned": self.grids_thinned,
+        }}

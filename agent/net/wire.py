@@ -74,6 +74,7 @@ REASONS: frozenset[str] = frozenset(
         "grid_stale",  # a grid message not newer than the last one decoded from that origin
         "grid_geometry",  # a grid whose geometry differs from the receiver's
         "bad_fire",  # malformed fire truth (agent.net.fire_truth)
+        "future_epoch",  # a track stamped too far ahead of the receiver's clock (agent.beliefs.tracks)
     }
 )
 

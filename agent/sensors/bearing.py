@@ -1,8 +1,8 @@
 """The geometric bearing sensor: what a down-looking camera plus a detector would report.
 
 It stands in for the camera pipeline (:class:`agent.sensors.camera.CameraSensor`, ``[sensor] kind =
-"camera"``, has the same interface: ``measure(t, state, truth)``, ``metrics()``, ``video_quality``) and
-produces :class:`Bearing` measurements — azimuth/elevation in NED with their covariance — from the
+"camera"``; both are a :class:`BearingSource`: ``detect(t, state, truth)``, ``metrics()``, ``video_quality``)
+and produces :class:`Bearing` measurements — azimuth/elevation in NED with their covariance — from the
 world truth it is given as plain data. Noise is isotropic on the line of sight with standard deviation
 ``sigma`` [rad]: perturbing the unit line of sight by a small rotation of ``sigma`` gives
 ``sigma_el = sigma`` and ``sigma_az = sigma / cos(el)`` (the azimuth of a near-vertical ray is poorly
@@ -66,10 +66,26 @@ def bearing_covariance(el: float, sigma: float) -> np.ndarray:
     return np.diag([(sigma / cos_el) ** 2, sigma**2])
 
 
-class GeometricBearingSensor:
-    """Detects the targets inside a down-looking cone and within range, with noise, misses and clutter."""
+class BearingSource:
+    """The sensor seam (:class:`agent.plugins.Sensor`) of a sensor that turns the targets it can see into
+    :class:`Bearing` observations (``"bearings"``) through its ``detect(t, state, truth)``; the targets
+    come from the step's simulated truth (none on a real vehicle)."""
 
-    video_quality = None  # no video: nothing to publish as D(t)
+    video_quality: float | None = None  # D(t) of thesis 000 §2.4 (None: no video)
+    _targets: list[dict] = []
+
+    def on_truth(self, truth) -> None:
+        self._targets = truth.targets or []
+
+    def measure(self, t: float, state) -> dict:
+        return {"bearings": self.detect(t, state, self._targets)}
+
+    def telemetry(self) -> dict:
+        return {"video_quality": self.video_quality}
+
+
+class GeometricBearingSensor(BearingSource):
+    """Detects the targets inside a down-looking cone and within range, with noise, misses and clutter."""
 
     def __init__(self, config: BearingSensorConfig, seed: int):
         self.config = config
@@ -90,7 +106,7 @@ class GeometricBearingSensor:
         off_nadir = np.arccos(np.clip(d[2] / dist, -1.0, 1.0))  # nadir is +z in NED
         return off_nadir <= self.config.fov / 2
 
-    def measure(self, t: float, state, truth: list[dict]) -> list[Bearing]:
+    def detect(self, t: float, state, truth: list[dict]) -> list[Bearing]:
         """Bearings to the true targets (given as ``{"id", "position"}``) seen at ``t`` from ``state``: a
         :class:`agent.vehicles.base.VehicleState` (only its position matters) or a camera position (3,)."""
         sensor = np.asarray(getattr(state, "position", state), float)

@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.sensors.bearing import Bearing
+from agent.sensors.bearing import Bearing, BearingSource
 from agent.sensors.camera_config import CameraSensorConfig
 from fusion.measurement import los_to_azel
 from perception.blobs import ColorBlobDetector, DarkBlobDetector
@@ -98,7 +98,7 @@ class CameraStats:
     outcomes: Counter = field(default_factory=Counter)  # reason -> frames or detections lost
 
 
-class CameraSensor:
+class CameraSensor(BearingSource):
     """The camera pipeline behind the sensor interface ``measure(t, state, truth) -> [Bearing]``.
 
     ``terrain`` is the world's ground (drawn under the targets); ``source`` an optional
@@ -139,7 +139,7 @@ class CameraSensor:
         self.last_quality = None
 
     # -- the sensor interface ---------------------------------------------------------------------
-    def measure(self, t: float, state, truth: list[dict]) -> list[Bearing]:
+    def detect(self, t: float, state, truth: list[dict]) -> list[Bearing]:
         """Capture a frame at ``t`` from the vehicle ``state`` (a :class:`agent.vehicles.base.VehicleState`),
         detect, and return the bearings whose pose is known (this frame's, or earlier frames' that waited
         for a late pose). Never raises on bad frames or poses: they are counted in :attr:`outcomes`."""

@@ -83,3 +83,33 @@ class FireCamera:
         attitude = np.array([state.roll, state.pitch, state.yaw]) + n.attitude_sigma * self.rng.standard_normal(3)
         roll, pitch, yaw = (float(a) for a in attitude)
         return CameraPose.from_vehicle(position, roll, pitch, yaw, self.gimbal)
+
+
+class ThermalSensor:
+    """The fire camera as a sensor of the agent (:class:`agent.plugins.Sensor`): each step, one frame of the
+    simulated fire seen from the vehicle, as cell evidence (``"fire_evidence"``) on the grid whose cell
+    centres (NED) and side it was built for."""
+
+    def __init__(self, camera: FireCamera, cells_ned: np.ndarray, cell: float, terrain):
+        self.camera = camera
+        self.cells_ned = cells_ned
+        self.cell = cell
+        self.terrain = terrain
+        self._fires: list[Fire] = []
+        self._decoys: list[tuple[float, float, float]] = []
+
+    def on_truth(self, truth) -> None:
+        self._fires, self._decoys = truth.fires, truth.decoys
+
+    def measure(self, t: float, state) -> dict:
+        return {"fire_evidence": self.camera.evidence(state, self._fires, self._decoys, self.cells_ned, self.cell,
+                                                      self.terrain)}
+
+    def telemetry(self) -> dict:
+        return {}
+
+    def metrics(self) -> dict:
+        return {"frames": self.camera.frames}
+
+    def close(self) -> None:
+        pass

@@ -72,7 +72,7 @@ class SteppedFleet:
             self.world.publish_truth(t)
             for agent in self.agents:
                 agent.step(t)
-                self.detections[agent.id] += len(agent.last_bearings)
+                self.detections[agent.id] += len(agent.exchanges["track"].last_bearings)
             self.world.absorb_measurements()
             self.k += 1
 
@@ -168,11 +168,11 @@ def test_decentralized_fusion_equals_the_oracle_on_a_tree(policy, topology):
     assert len(observers) < len(fleet.agents), fleet.detections  # ... and relayed to agents that never saw it
     oracle = only_track(fleet.world.oracle.tracker)
     for agent in fleet.agents:
-        track = only_track(agent.tracker)
+        track = only_track(agent.exchanges["track"].tracker)
         assert track.belief.epoch == oracle.belief.epoch == fleet.k - 1
         errors = exactness_errors(track, oracle)
         assert max(errors.values()) < 1e-9, (agent.id, errors)
-        assert set(agent.counters.fusions) == {"exact"}, (agent.id, agent.counters.fusions)
+        assert set(agent.fusions) == {"exact"}, (agent.id, agent.fusions)
 
 
 def test_naive_fusion_on_a_tree_is_overconfident():
@@ -181,7 +181,7 @@ def test_naive_fusion_on_a_tree_is_overconfident():
     oracle = only_track(fleet.world.oracle.tracker)
     oracle_trace = np.trace(oracle.estimate().cov[:3, :3])
     for agent in fleet.agents:
-        track = only_track(agent.tracker)
+        track = only_track(agent.exchanges["track"].tracker)
         assert max(exactness_errors(track, oracle).values()) > 1e-2
         assert np.trace(track.estimate().cov[:3, :3]) < 0.8 * oracle_trace, agent.id
 

@@ -147,7 +147,7 @@ def test_planner_heads_for_the_unexplored_side():
         else:
             p[:, :15] = 0.5
         pl = planner()
-        goal = pl.plan(np.array([150.0, 150.0, -30.0]), p, c)
+        goal = pl.goal_for(np.array([150.0, 150.0, -30.0]), p, c)
         assert goal.position[2] == -30.0
         seen = np.sum((c - goal.position[:2]) ** 2, axis=-1) <= 40.0**2  # the footprint disc at the goal
         assert pl.last_gain == pytest.approx(float(np.sum(expected_entropy_reduction(p[seen], 0.9, 0.05))))
@@ -157,7 +157,7 @@ def test_planner_heads_for_the_unexplored_side():
 
 
 def test_planner_stays_when_nothing_is_left_to_learn():
-    goal = planner().plan(np.array([150.0, 150.0]), np.zeros((30, 30)), centres())
+    goal = planner().goal_for(np.array([150.0, 150.0]), np.zeros((30, 30)), centres())
     np.testing.assert_allclose(goal.position, [150.0, 150.0, -30.0])
 
 
@@ -170,7 +170,7 @@ def test_planner_never_leaves_the_area_even_for_unexplored_cells_outside():
     pl = planner()
     position = np.array([0.0, 0.0, -30.0])
     for _ in range(5):
-        goal = pl.plan(position, p, c)
+        goal = pl.goal_for(position, p, c)
         assert AREA[0] <= goal.position[0] <= AREA[1] and AREA[2] <= goal.position[1] <= AREA[3]
         position = goal.position
 
@@ -179,7 +179,7 @@ def test_planner_never_leaves_the_area_even_for_unexplored_cells_outside():
 @given(st.floats(0.0, 300.0), st.floats(0.0, 300.0), st.integers(0, 2**31 - 1), st.integers(1, 2))
 def test_planner_goal_is_inside_the_area_and_one_move_away(north, east, seed, horizon):
     p = np.random.default_rng(seed).uniform(size=(30, 30))
-    goal = planner(horizon=horizon).plan(np.array([north, east, -30.0]), p, centres())
+    goal = planner(horizon=horizon).goal_for(np.array([north, east, -30.0]), p, centres())
     n, e = goal.position[:2]
     assert -1e-9 <= n <= 300.0 + 1e-9 and -1e-9 <= e <= 300.0 + 1e-9
     move = np.round((goal.position[:2] - [north, east]) / 20.0, 9)
@@ -187,7 +187,7 @@ def test_planner_goal_is_inside_the_area_and_one_move_away(north, east, seed, ho
 
 
 def test_planner_outside_the_area_returns_to_its_nearest_point():
-    goal = planner().plan(np.array([-100.0, 150.0, -30.0]), np.full((30, 30), 0.5), centres())
+    goal = planner().goal_for(np.array([-100.0, 150.0, -30.0]), np.full((30, 30), 0.5), centres())
     np.testing.assert_allclose(goal.position, [0.0, 150.0, -30.0])
 
 
@@ -197,10 +197,10 @@ def test_beta_variant_prefers_cells_with_little_evidence():
     p = np.full((30, 30), 0.5)
     alpha = np.full((30, 30), 30.0)
     alpha[:, :15] = 1.0
-    goal = planner().plan(np.array([150.0, 150.0]), p, c, beta=(alpha, alpha.copy()))
+    goal = planner().goal_for(np.array([150.0, 150.0]), p, c, beta=(alpha, alpha.copy()))
     assert goal.position[1] < 150.0
     alpha = alpha[:, ::-1].copy()
-    assert planner().plan(np.array([150.0, 150.0]), p, c, beta=(alpha, alpha.copy())).position[1] > 150.0
+    assert planner().goal_for(np.array([150.0, 150.0]), p, c, beta=(alpha, alpha.copy())).position[1] > 150.0
 
 
 def test_turn_cost_keeps_the_heading_when_gains_tie():
@@ -212,7 +212,7 @@ def test_turn_cost_keeps_the_heading_when_gains_tie():
     for heading in (1.0, -1.0):
         pl = planner()
         pl.last_move = np.array([heading * 20.0, 0.0])
-        goal = pl.plan(np.array([150.0, 150.0]), p, c)
+        goal = pl.goal_for(np.array([150.0, 150.0]), p, c)
         np.testing.assert_allclose(goal.position[:2], [150.0 + heading * 20.0, 150.0])
 
 
@@ -222,8 +222,8 @@ def test_longer_horizon_sees_beyond_one_move():
     p = np.full((30, 30), 0.01)
     p[:, 22:25] = 0.5  # east 220-250, i.e. 70-100 m from the agent at east 150
     position = np.array([150.0, 150.0])
-    assert planner(horizon=1).plan(position, p, c).position[1] == 150.0
-    assert planner(horizon=2).plan(position, p, c).position[1] == 170.0
+    assert planner(horizon=1).goal_for(position, p, c).position[1] == 150.0
+    assert planner(horizon=2).goal_for(position, p, c).position[1] == 170.0
 
 
 def test_horizon_two_matches_brute_force_enumeration():
@@ -247,7 +247,7 @@ def test_horizon_two_matches_brute_force_enumeration():
         score = gain - cfg.cost_weight * cost
         if score > best + 1e-12:
             best, best_move = score, m1
-    goal = pl.plan(here, p, c)
+    goal = pl.goal_for(here, p, c)
     np.testing.assert_allclose(goal.position[:2], here + best_move)
 
 
@@ -273,7 +273,7 @@ def test_shared_map_gives_implicit_coordination(shared):
     for _ in range(12):
         for i, agent in enumerate(agents):
             m = 0 if shared else i
-            positions[i] = agent.plan(positions[i], maps[m], c).position[:2]
+            positions[i] = agent.goal_for(positions[i], maps[m], c).position[:2]
             maps[m], seen = observe_nothing(maps[m], c, positions[i], cfg)
             covered[i] |= seen
     overlap = np.sum(covered[0] & covered[1]) / np.sum(covered[0] | covered[1])
@@ -324,27 +324,27 @@ def test_bad_plan_inputs_raise():
     pl, c, p = planner(), centres(), np.full((30, 30), 0.5)
     here = np.array([150.0, 150.0, -30.0])
     with pytest.raises(ValueError, match="probability"):
-        pl.plan(here, np.full((30, 30), 1.2), c)  # p above 1
+        pl.goal_for(here, np.full((30, 30), 1.2), c)  # p above 1
     with pytest.raises(ValueError, match="probability"):
-        pl.plan(here, np.full((30, 30), -0.1), c)  # p below 0
+        pl.goal_for(here, np.full((30, 30), -0.1), c)  # p below 0
     with pytest.raises(ValueError, match="non-finite"):
-        pl.plan(here, np.full((30, 30), np.nan), c)  # NaN p
+        pl.goal_for(here, np.full((30, 30), np.nan), c)  # NaN p
     with pytest.raises(ValueError, match="probability"):
-        pl.plan(here, np.full(30, 0.5), c)  # 1-D probability
+        pl.goal_for(here, np.full(30, 0.5), c)  # 1-D probability
     with pytest.raises(ValueError, match="centres"):
-        pl.plan(here, p, c[:, :20])  # centres of another shape
+        pl.goal_for(here, p, c[:, :20])  # centres of another shape
     with pytest.raises(ValueError, match="centres"):
-        pl.plan(here, p, c[..., 0])  # centres without the (north, east) axis
+        pl.goal_for(here, p, c[..., 0])  # centres without the (north, east) axis
     with pytest.raises(ValueError, match="position"):
-        pl.plan(np.array([150.0, np.nan, -30.0]), p, c)  # NaN position
+        pl.goal_for(np.array([150.0, np.nan, -30.0]), p, c)  # NaN position
     with pytest.raises(ValueError, match="position"):
-        pl.plan(np.zeros(4), p, c)  # position of length 4
+        pl.goal_for(np.zeros(4), p, c)  # position of length 4
     with pytest.raises(ValueError, match="shape"):
-        pl.plan(here, p, c, beta=(np.ones((30, 30)), np.ones((20, 30))))  # alpha and beta of different shapes
+        pl.goal_for(here, p, c, beta=(np.ones((30, 30)), np.ones((20, 30))))  # alpha and beta of different shapes
     with pytest.raises(ValueError, match="> 0"):
-        pl.plan(here, p, c, beta=(np.zeros((30, 30)), np.ones((30, 30))))  # zero Beta counts
+        pl.goal_for(here, p, c, beta=(np.zeros((30, 30)), np.ones((30, 30))))  # zero Beta counts
     with pytest.raises(ValueError, match="pair"):
-        pl.plan(here, p, c, beta=np.ones((30, 30)))  # one array, not a pair
+        pl.goal_for(here, p, c, beta=np.ones((30, 30)))  # one array, not a pair
 
 
 def test_bad_gain_inputs_raise():

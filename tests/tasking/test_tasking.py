@@ -188,25 +188,25 @@ def test_planner_switches_from_search_to_orbit_and_back():
     planner = PlaceholderPlanner(1, 3, AREA, altitude=30.0, search="lawnmower", spacing=20.0, orbit_radius=15.0)
     lane = lane_area(AREA, 1, 3)
     position = np.array([0.0, 0.0, -30.0])
-    goal = planner.plan(position, [])
+    goal = planner.goal_for(position, [])
     assert planner.mode == "search" and planner.target_id is None and not goal.is_orbit
     assert lane[2] <= goal.position[1] <= lane[3] and goal.position[2] == -30.0
     # fly the lane for a few waypoints
     for _ in range(3):
         position = goal.position.copy()
-        goal = planner.plan(position, [])
+        goal = planner.goal_for(position, [])
     resume = goal.position.copy()
     tracks = [(7, np.array([150.0, 40.0, 0.0])), (3, np.array([20.0, 120.0, 0.0]))]
-    goal = planner.plan(position, tracks)
+    goal = planner.goal_for(position, tracks)
     assert planner.mode == "orbit" and planner.target_id == 7  # sorted by north: [3, 7]; agent 1 -> 7
     assert goal.is_orbit and goal.orbit_radius == 15.0
     np.testing.assert_allclose(goal.orbit_center, [150.0, 40.0])
     np.testing.assert_allclose(goal.position, [150.0, 40.0, -30.0])
     # the orbit follows the fused estimate
-    goal = planner.plan(position, [(7, np.array([152.0, 41.0, 0.0])), tracks[1]])
+    goal = planner.goal_for(position, [(7, np.array([152.0, 41.0, 0.0])), tracks[1]])
     np.testing.assert_allclose(goal.orbit_center, [152.0, 41.0])
     # tracks gone: back to searching, from where the search was left
-    goal = planner.plan(np.array([150.0, 40.0, -30.0]), [])
+    goal = planner.goal_for(np.array([150.0, 40.0, -30.0]), [])
     assert planner.mode == "search" and planner.target_id is None and not goal.is_orbit
     np.testing.assert_allclose(goal.position, resume)
 
@@ -218,7 +218,7 @@ def test_planner_lanes_cover_the_area_together():
         lane = lane_area(AREA, k, n)
         position = np.array([100.0, 100.0, -25.0])
         for _ in range(10):
-            goal = planner.plan(position, [])
+            goal = planner.goal_for(position, [])
             assert lane[2] <= goal.position[1] <= lane[3]
             position = goal.position
 
@@ -227,15 +227,15 @@ def test_planner_patrol_moves_point_to_point():
     planner = PlaceholderPlanner(0, 2, AREA, altitude=20.0, search="patrol", spacing=20.0, seed=5)
     other = PlaceholderPlanner(1, 2, AREA, altitude=20.0, search="patrol", spacing=20.0, seed=5)
     start = np.array([-1000.0, -1000.0, -20.0])
-    first = planner.plan(start, []).position
-    assert not np.allclose(first, other.plan(start, []).position)  # agents patrol differently
-    np.testing.assert_allclose(planner.plan(start, []).position, first)  # holds until reached
-    second = planner.plan(first, []).position  # reached: a new point
+    first = planner.goal_for(start, []).position
+    assert not np.allclose(first, other.goal_for(start, []).position)  # agents patrol differently
+    np.testing.assert_allclose(planner.goal_for(start, []).position, first)  # holds until reached
+    second = planner.goal_for(first, []).position  # reached: a new point
     assert not np.allclose(first, second)
     for point in (first, second):
         assert 0.0 <= point[0] <= 200.0 and 0.0 <= point[1] <= 200.0 and point[2] == -20.0
     again = PlaceholderPlanner(0, 2, AREA, altitude=20.0, search="patrol", spacing=20.0, seed=5)
-    np.testing.assert_allclose(again.plan(start, []).position, first)  # reproducible
+    np.testing.assert_allclose(again.goal_for(start, []).position, first)  # reproducible
 
 
 @pytest.mark.parametrize(

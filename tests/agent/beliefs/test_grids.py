@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from agent.beliefs.grid_config import GridConfig
-from agent.beliefs.grids import FireMapper
+from agent.beliefs.grids import GridExchange
 from agent.net import wire
 from perception.terrain import FlatTerrain
 
@@ -21,7 +21,7 @@ AREA = (-50.0, 50.0, -50.0, 50.0)
 class Node:
     def __init__(self, name: str, config: GridConfig):
         self.name = name
-        self.mapper = FireMapper(name, config, AREA, FlatTerrain(), seed=1)
+        self.mapper = GridExchange(name, config, AREA, FlatTerrain(), seed=1, outbox=None)
         self.seq = 0
 
     def observe(self, rng, central, positive: bool = False):
@@ -36,10 +36,10 @@ class Node:
         return central.update_cells(index, m, n)
 
     def send(self, neighbours: list[str]) -> tuple[int, dict]:
-        payload, quantized = self.mapper.outgoing(neighbours)
+        message = self.mapper.outgoing(self.seq * self.mapper.config.period, neighbours)  # a broadcast is due
         self.seq += 1
-        self.mapper.sent(self.seq, payload, quantized)
-        return self.seq, payload
+        self.mapper.sent(self.seq, message)
+        return self.seq, message.payload
 
 
 def _exchange(nodes: dict, edges, rounds: int, rng, central, tree: bool, positive=False, observe_rounds=None):
@@ -52,7 +52,7 @@ def _exchange(nodes: dict, edges, rounds: int, rng, central, tree: bool, positiv
         for name, node in nodes.items():
             seq, payload = node.send(neighbours[name])
             for peer in neighbours[name]:
-                nodes[peer].mapper.receive(name, seq, payload, tree_edge=tree)
+                nodes[peer].mapper.receive(name, seq, 0.0, payload, tree, 0.0)
     return central
 
 
@@ -103,7 +103,7 @@ def test_bad_grid_messages_are_rejected_and_change_nothing(bad, reason):
     before = receiver.mapper.grid.evidence.copy()
     seq, payload = _message(**bad)
     with pytest.raises(wire.DecodeError) as err:
-        receiver.mapper.receive("a", seq, payload, tree_edge=True)
+        receiver.mapper.receive("a", seq, 0.0, payload, True, 0.0)
     if reason is not None:
         assert err.value.reason == reason
     assert err.value.reason in wire.REASONS
@@ -121,7 +121,7 @@ def test_negative_beta_counts_on_the_wire_are_rejected():
     layers[0, 0, 0] = -3.0
     payload["grid"] = encode_grid(layers, None, None)
     with pytest.raises(wire.DecodeError) as err:
-        receiver.mapper.receive("a", seq, payload, tree_edge=True)
+        receiver.mapper.receive("a", seq, 0.0, payload, True, 0.0)
     assert err.value.reason == "grid_bad_values"
 
 

@@ -140,7 +140,7 @@ def test_crossing_targets_keep_one_track_each_and_their_identities(seed, duplica
         tracker.advance(k)
         truth = crossing(t)
         for sensor, camera in zip(sensors, CROSSING_CAMERAS, strict=True):
-            tracker.update(sensor.measure(t, camera, truth))
+            tracker.update(sensor.detect(t, camera, truth))
         if k == 25:
             assert len(tracker.estimates()) == 2
             for target in truth:
@@ -193,7 +193,7 @@ def run_clutter(false_alarms: float, seed: int, seconds: float = 30.0) -> dict:
         truth = [target(t) for target in CLUTTER_TARGETS]
         initiated.append(0)
         for i, sensor in enumerate(sensors):
-            initiated[-1] += tracker.update(sensor.measure(t, orbiting_camera(i, t), truth))["initiated"]
+            initiated[-1] += tracker.update(sensor.detect(t, orbiting_camera(i, t), truth))["initiated"]
         for track in tracker.tracks.values():  # a tentative track lives at most confirm_within epochs
             assert track.confirmed or tracker.epoch - track.created_epoch < tracker.config.confirm_within
         tentative = sum(not track.confirmed for track in tracker.tracks.values())
@@ -256,7 +256,7 @@ def initiation_nees(config: TrackerConfig, simulate_errors: bool, draws: int = 3
         ground_error = rng.normal(0.0, 2.0) if simulate_errors else 0.0
         target = camera + np.array([radius * np.cos(azimuth), radius * np.sin(azimuth), 0.0])
         target[2] = -ground_error  # heights are positive up
-        (bearing,) = sensor.measure(1.0, camera, [{"id": "T", "position": target}])
+        (bearing,) = sensor.detect(1.0, camera, [{"id": "T", "position": target}])
         if simulate_errors:
             bearing = dataclasses.replace(bearing, sensor=camera + rng.normal(0.0, 0.5, 3))
         tracker = Tracker(config, STEP, GROUND)
@@ -296,7 +296,7 @@ def measure_both(link: Link, sensors: dict, k: int, targets) -> None:
     truth = [target(t) for target in targets]
     for name, camera in (("A", CAMERA_A), ("B", CAMERA_B)):
         link.trackers[name].advance(k)
-        link.trackers[name].update(sensors[name].measure(t, camera, truth))
+        link.trackers[name].update(sensors[name].detect(t, camera, truth))
 
 
 def test_peer_tracks_are_matched_through_the_label_table_or_adopted():
@@ -353,7 +353,7 @@ def test_unmeasured_track_is_deleted_after_stale_after_whatever_peers_echo():
     for k in range(10, 50):
         a.advance(k)
         b.advance(k)
-        b.update(sensors["B"].measure(k * STEP, CAMERA_B, [SHARED(k * STEP)]))
+        b.update(sensors["B"].detect(k * STEP, CAMERA_B, [SHARED(k * STEP)]))
         link.exchange()
         assert a_id in a.tracks
     last = a.tracks[a_id].last_measured
@@ -391,9 +391,9 @@ def test_duplicate_tracks_are_merged_and_labels_move_to_the_kept_track():
         truth = [SHARED(t)]
         a.advance(k)
         b.advance(k)
-        a.update(sensor_a.measure(t, CAMERA_A, truth))
-        (x,) = sensor_b1.measure(t, cameras_b[0], truth)
-        (y,) = sensor_b2.measure(t, cameras_b[1], truth)
+        a.update(sensor_a.detect(t, CAMERA_A, truth))
+        (x,) = sensor_b1.detect(t, cameras_b[0], truth)
+        (y,) = sensor_b2.detect(t, cameras_b[1], truth)
         b.update([dataclasses.replace(x, truth_id="X"), dataclasses.replace(y, truth_id="Y")], by_label=True)
     (a_id,) = a.tracks
     assert len(b.estimates()) == 2
@@ -426,7 +426,7 @@ def test_distinct_targets_are_not_merged():
     targets = [static("T1", -15.0, 10.0), static("T2", 20.0, -12.0)]
     for k in range(10):
         tracker.advance(k)
-        tracker.update(sensor.measure(k * STEP, camera, [target(k * STEP) for target in targets]))
+        tracker.update(sensor.detect(k * STEP, camera, [target(k * STEP) for target in targets]))
     assert len(tracker.estimates()) == 2
     assert tracker.merge_duplicates() == 0
     assert len(tracker.estimates()) == 2
@@ -454,8 +454,8 @@ def run_pair(config: TrackerConfig, steps: int = 40):
         t = k * STEP
         a.advance(k)
         b.advance(k)
-        from_a = sensor_a.measure(t, CAMERA_A, moving_target(t))
-        from_b = sensor_b.measure(t, camera_b, moving_target(t))
+        from_a = sensor_a.detect(t, CAMERA_A, moving_target(t))
+        from_b = sensor_b.detect(t, camera_b, moving_target(t))
         assert len(from_a) == 1 and len(from_b) == 1
         b_measures = bool(b.tracks)
         expected = "updated" if a.tracks else "initiated"

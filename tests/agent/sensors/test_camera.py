@@ -102,7 +102,7 @@ def test_first_order_covariance_matches_monte_carlo():
 def test_a_target_below_is_detected_labelled_and_located():
     sensor = CameraSensor(CameraSensorConfig(), seed=1)
     truth = [{"id": "car", "position": [12.0, -7.0, 0.0]}, {"id": "far", "position": [500.0, 0.0, 0.0]}]
-    bearings = sensor.measure(0.0, state(0.0), truth)
+    bearings = sensor.detect(0.0, state(0.0), truth)
     assert len(bearings) == 1
     (b,) = bearings
     assert b.truth_id == "car" and b.t == 0.0
@@ -115,7 +115,7 @@ def test_a_target_below_is_detected_labelled_and_located():
 def test_a_failed_video_link_detects_nothing_and_says_so_in_d():
     sensor = CameraSensor(CameraSensorConfig(failed="snow"), seed=1)
     for k in range(10):
-        assert sensor.measure(0.2 * k, state(0.2 * k), [{"id": "car", "position": [0.0, 0.0, 0.0]}]) == []
+        assert sensor.detect(0.2 * k, state(0.2 * k), [{"id": "car", "position": [0.0, 0.0, 0.0]}]) == []
     assert sensor.quality.failed and sensor.video_quality > 0.15
     assert sensor.metrics()["detection_rate"] == 0.0
 
@@ -124,13 +124,13 @@ def test_the_geometric_and_camera_sensors_share_the_interface():
     truth = [{"id": "car", "position": [5.0, 5.0, 0.0]}]
     for sensor in (GeometricBearingSensor(BearingSensorConfig(p_detect=1.0, false_alarms=0.0), 0),
                    CameraSensor(CameraSensorConfig(), 0)):
-        (b,) = sensor.measure(1.0, state(1.0), truth)
+        (b,) = sensor.detect(1.0, state(1.0), truth)
         assert b.truth_id == "car" and b.R.shape == (2, 2)
         assert "outcomes" in sensor.metrics()
         sensor.close()
     # the geometric sensor still takes a bare camera position (older callers)
     geometric = GeometricBearingSensor(BearingSensorConfig(p_detect=1.0, false_alarms=0.0), 0)
-    assert len(geometric.measure(1.0, np.array([0.0, 0.0, -80.0]), truth)) == 1
+    assert len(geometric.detect(1.0, np.array([0.0, 0.0, -80.0]), truth)) == 1
 
 
 # -------------------------------------------------------------------------------------------- latency
@@ -142,7 +142,7 @@ def overflight(config: CameraSensorConfig, speed: float = 10.0, steps: int = 40)
     out = []
     for k in range(steps):
         t = 0.2 * k
-        for b in sensor.measure(t, state(t, (speed * t - 20.0, 0.0, -80.0), velocity=(speed, 0, 0)),
+        for b in sensor.detect(t, state(t, (speed * t - 20.0, 0.0, -80.0), velocity=(speed, 0, 0)),
                                 [{"id": "T", "position": [20.0, 0.0, 0.0]}]):
             out.append((b, t))
     return sensor, out
@@ -207,7 +207,7 @@ BAD_FRAMES = [None, np.zeros((0, 0, 3), np.uint8), np.zeros((100, 100, 3), np.ui
 def test_bad_frames_are_counted_by_reason_and_never_raise():
     source = ScriptedSource([*BAD_FRAMES, good_frame()])
     sensor = CameraSensor(CameraSensorConfig(), seed=0, source=source)
-    out = [sensor.measure(0.2 * k, state(0.2 * k), []) for k in range(len(BAD_FRAMES) + 2)]
+    out = [sensor.detect(0.2 * k, state(0.2 * k), []) for k in range(len(BAD_FRAMES) + 2)]
     assert all(not bearings for bearings in out[:-2])
     assert len(out[-2]) == 1 and out[-2][0].truth_id is None  # the good frame: a detection, no truth label
     assert sensor.outcomes == Counter({"read_failed": 2, "frame_empty": 1, "frame_wrong_shape": 2,
@@ -221,19 +221,19 @@ def test_a_capture_older_than_the_pose_buffer_is_counted():
     sensor = CameraSensor(CameraSensorConfig(pose_buffer=8), seed=0)
     truth = [{"id": "T", "position": [0.0, 0.0, 0.0]}]
     for k in range(11):
-        assert len(sensor.measure(0.2 * k, state(0.2 * k), truth)) == 1
+        assert len(sensor.detect(0.2 * k, state(0.2 * k), truth)) == 1
     # a frame stamped 0.5 s reaches the sensor after 2 s of poses (a stalled capture): its pose is gone
-    assert sensor.measure(0.5, state(0.5), truth) == []
+    assert sensor.detect(0.5, state(0.5), truth) == []
     assert sensor.outcomes["pose_too_old"] == 1
 
 
 def test_a_pose_that_never_arrives_times_out():
     sensor = CameraSensor(CameraSensorConfig(gps_latency=0.43, latency_compensation=True), seed=0)
     truth = [{"id": "T", "position": [0.0, 0.0, 0.0]}]
-    sensor.measure(0.0, state(0.0), truth)  # no report yet at t = 0 (the first is 0.43 s late)
+    sensor.detect(0.0, state(0.0), truth)  # no report yet at t = 0 (the first is 0.43 s late)
     # the vehicle state stops being valid (NaN): no telemetry, so the waiting frame's pose never comes
     for k in range(1, 12):
-        sensor.measure(0.2 * k, state(0.2 * k, (np.nan, 0.0, -80.0)), truth)
+        sensor.detect(0.2 * k, state(0.2 * k, (np.nan, 0.0, -80.0)), truth)
     assert sensor.outcomes["pose_timeout"] >= 1 and sensor.outcomes["bad_vehicle_state"] == 11
 
 
@@ -272,7 +272,7 @@ def test_a_video_file_replaces_the_synthetic_camera(red_target_video):
     sensor = CameraSensor(CameraSensorConfig(), seed=0, source=source)
     hits = []
     for k in range(14):
-        hits.append(sensor.measure(0.2 * k, state(0.2 * k), truth=[{"id": "ignored", "position": [50, 50, 0]}]))
+        hits.append(sensor.detect(0.2 * k, state(0.2 * k), truth=[{"id": "ignored", "position": [50, 50, 0]}]))
     assert all(len(h) == 1 for h in hits[:12])
     for (b,) in hits[:12]:
         assert b.truth_id is None  # an external camera has no truth labels

@@ -25,7 +25,7 @@ def test_vehicles_fly_a_lawnmower_lane_through_the_planner(config):
     for _ in range(2000):  # 400 s
         state = vehicle.state()
         positions.append(state.position)
-        vehicle.set_setpoint(goal_to_setpoint(planner.plan(state.position, [])))
+        vehicle.set_setpoint(goal_to_setpoint(planner.goal_for(state.position, [])))
         vehicle.step(0.2)
     positions = np.array(positions)
     closest = [np.min(np.linalg.norm(positions[:, :2] - waypoint[:2], axis=1)) for waypoint in path]

@@ -1,0 +1,48 @@
+"""Belief exchanges (:class:`agent.plugins.BeliefExchange`), one per wire kind, and their registry.
+
+``EXCHANGES`` maps a wire kind to a builder that returns the exchange when the scenario asks for it
+(``None`` otherwise): tracks always, a grid with a ``[grid]`` section. Adding a belief kind is one module
+in this folder plus one line here.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from agent.beliefs.grids import GridExchange
+from agent.beliefs.tracks import TrackExchange
+from agent.net.sending import SendScheduler
+from agent.plugins import BeliefExchange, Outbox
+
+
+@dataclass(frozen=True)
+class ExchangeContext:
+    """What an agent gives the exchanges it hosts."""
+
+    me: str
+    scenario: object  # agent.config.AgentScenario
+    terrain: object
+    seed: int
+    sender: SendScheduler  # the link budget and the track-sending trigger
+    outbox: Outbox
+    unused: Counter  # observations the agent could not use, by reason
+
+
+def _tracks(ctx: ExchangeContext) -> TrackExchange:
+    sc = ctx.scenario
+    return TrackExchange(ctx.me, sc.tracking, sc.step, ctx.terrain, ctx.seed, ctx.sender, ctx.outbox, ctx.unused)
+
+
+def _grid(ctx: ExchangeContext) -> GridExchange | None:
+    sc = ctx.scenario
+    if sc.grid is None:
+        return None
+    return GridExchange(ctx.me, sc.grid, sc.area.as_tuple(), ctx.terrain, ctx.seed + 7919, ctx.outbox)
+
+
+EXCHANGES: dict[str, Callable[[ExchangeContext], BeliefExchange | None]] = {
+    "track": _tracks,
+    "grid": _grid,
+}

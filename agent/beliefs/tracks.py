@@ -1,0 +1,158 @@
+"""The ``"track"`` belief exchange: targets tracked from bearings and shared as trajectory beliefs.
+
+The plug-in (:class:`agent.plugins.BeliefExchange`) around :class:`agent.beliefs.tracking.Tracker`:
+
+* **absorb**: the step's bearings that the trajectory window can still take are associated and applied
+  (Merino (3.52)/(3.64)); the others are counted as ``bearing_outside_window``, never applied. The raw
+  bearings also go to the simulator's centralized oracle (simulation only, not radio traffic);
+* **outgoing**: every ``[sending] period`` the confirmed tracks that gained ``info_gain`` nats, or were
+  silent for ``max_silence`` (:mod:`agent.net.sending`), each charged to the link budget; each entry carries
+  the per-track acknowledgement of the peer's last copy fused here;
+* **receive**: decode every track (:mod:`agent.net.wire`), reject a message stamped more than
+  :data:`FUTURE_EPOCHS` steps ahead of ours (a clock fault), fuse through the per-track channel filters
+  (exact on tree edges, intersection elsewhere; :mod:`fusion.channel_filter`);
+* **view**: the confirmed tracks' positions, for planners; **evaluate**: RMSE/ANEES against the truth.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+
+from agent.beliefs.tracking import RemoteTrack, Tracker, TrackerConfig
+from agent.evaluation import TrackEvaluator
+from agent.net import wire
+from agent.net.gaussian_codec import decode_trajectory, encode_trajectory
+from agent.net.sending import SendScheduler
+from agent.plugins import Observations, Outbox, Outgoing
+from agent.sensors.bearing import Bearing
+from agent.sensors.truth import TruthSnapshot
+from tasking.base import TrackView
+
+FUTURE_EPOCHS = 50  # a peer's belief this many steps ahead of ours is rejected as a clock fault (chosen here)
+TRACK_ENTRY_BYTES = 5000  # budget charged per track sent: an 8-state trajectory encodes to ~4.8 kB
+
+
+class TrackExchange:
+    """Tracks of one agent, exchanged with its peers. ``unused`` counts observations it could not use."""
+
+    kind = "track"
+
+    def __init__(self, me: str, config: TrackerConfig, step: float, terrain, seed: int, sender: SendScheduler,
+                 outbox: Outbox, unused: Counter):
+        self.me = me
+        self.tracker = Tracker(config, step, terrain, seed=seed + 104729)
+        self.sender = sender
+        self.outbox = outbox
+        self.unused = unused
+        self.evaluator = TrackEvaluator()
+        self.latencies: list[float] = []  # stamp-to-fusion delays of received beliefs [s of simulation time]
+        self.last_bearings: list[Bearing] = []
+        self._chosen: list = []
+
+    def sensors(self) -> list:
+        """Tracks bring no sensor of their own: they use the ``[sensor]`` section's bearings."""
+        return []
+
+    def planning_hints(self) -> dict:
+        return {}
+
+    # -- local ------------------------------------------------------------------------------------
+    def absorb(self, t: float, observations: Observations) -> None:
+        self.tracker.advance(self.tracker.model.epoch_of(t))
+        bearings = self._usable(observations.get("bearings", []))
+        self.tracker.update(bearings)
+        self.last_bearings = bearings
+        self.outbox.to_simulator("measurement", t, {"bearings": [
+            {"t": b.t, "sensor": b.sensor, "azel": b.azel, "R": b.R, "truth": b.truth_id} for b in bearings]})
+
+    def _usable(self, bearings: list[Bearing]) -> list[Bearing]:
+        """Bearings the trajectory window can still take (a camera that waited for a late pose may hand
+        over some from before it)."""
+        oldest = self.tracker.epoch - self.tracker.model.window + 1
+        keep = []
+        for b in bearings:
+            if oldest <= self.tracker.model.epoch_of(b.t) <= self.tracker.epoch:
+                keep.append(b)
+            else:
+                self.unused["bearing_outside_window"] += 1
+        return keep
+
+    # -- sending ----------------------------------------------------------------------------------
+    def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
+        if not self.sender.due(t):
+            return None
+        self._chosen = self.sender.choose(t, self.tracker.confirmed(), TRACK_ENTRY_BYTES)
+        if not self._chosen:
+            return None
+        tracks = [
+            {"id": tr.id, "belief": encode_trajectory(tr.belief), "last_measured": tr.last_measured,
+             "acks": dict(tr.acks)}
+            for tr in self._chosen
+        ]
+        return Outgoing({"tracks": tracks}, prepaid=True)
+
+    def sent(self, seq: int, message: Outgoing) -> None:
+        self.tracker.record_sent(self._chosen, seq)
+
+    def thinned(self, message: Outgoing) -> None:
+        """Never called: track entries are charged to the budget one by one when chosen."""
+
+    # -- receiving --------------------------------------------------------------------------------
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool, t: float) -> list[str]:
+        remote = self._decode(payload)
+        if any(r.belief.epoch > self.tracker.epoch + FUTURE_EPOCHS for r in remote):
+            raise wire.DecodeError("future_epoch", f"a track more than {FUTURE_EPOCHS} steps ahead of ours")
+        methods = [out.method for out in self.tracker.fuse_remote(origin, remote, seq, tree_edge)]
+        self.latencies.append(t - stamp)
+        return methods
+
+    def _decode(self, payload: dict) -> list[RemoteTrack]:
+        tracks = payload.get("tracks")
+        if not isinstance(tracks, list):
+            raise wire.DecodeError("bad_field", "payload.tracks must be a list")
+        out = []
+        for entry in tracks:
+            if not isinstance(entry, dict) or not isinstance(entry.get("id"), int) or "belief" not in entry:
+                raise wire.DecodeError("bad_field", "each track needs an integer id and a belief")
+            last, acks = entry.get("last_measured"), entry.get("acks", {})
+            if isinstance(last, bool) or not isinstance(last, int | float) or not np.isfinite(last):
+                raise wire.DecodeError("bad_field", "each track needs a finite last_measured time")
+            if not isinstance(acks, dict) or not all(isinstance(v, int) and v >= 0 for v in acks.values()):
+                raise wire.DecodeError("bad_field", "track acks must map peers to sequence numbers")
+            belief = decode_trajectory(entry["belief"], self.tracker.model)
+            out.append(RemoteTrack(entry["id"], belief, float(last), acks.get(self.me)))
+        return out
+
+    # -- views and results ------------------------------------------------------------------------
+    def view(self) -> TrackView:
+        return TrackView([(tid, est.mean[:2]) for tid, est in self.tracker.estimates()])
+
+    def telemetry(self) -> dict:
+        out = {
+            "bearings": np.array([b.azel for b in self.last_bearings]).reshape(-1, 2),
+            "tracks": [{"id": tid, "mean": est.mean, "cov": est.cov} for tid, est in self.tracker.estimates()],
+        }
+        if self.tracker.initiator is not None:
+            out["particles"] = self.tracker.initiator.points()
+        return out
+
+    def evaluate(self, t: float, truth: TruthSnapshot) -> None:
+        if truth.targets is not None:
+            self.evaluator.record(t, truth.targets, self.tracker.estimates())
+
+    def metrics(self) -> dict:
+        lat = np.asarray(self.latencies, float)
+        out = {
+            "tracks_thinned": self.sender.thinned,
+            "belief_latency_s": {
+                "mean": float(lat.mean()) if lat.size else None,
+                "p95": float(np.percentile(lat, 95)) if lat.size else None,
+                "count": int(lat.size),
+            },
+            "targets": self.evaluator.summary(),
+        }
+        if self.tracker.initiator is not None:
+            out["particle_init"] = self.tracker.initiator.metrics()
+        return out

@@ -1,0 +1,130 @@
+"""The agent's seams (DESIGN.md §4), written as code: the agent is a host for these plug-ins.
+
+Each family lives in one folder with a registry, and the loop (:mod:`agent.agent`) names none of its
+implementations — in the style of Stone Soup's tiny ``base.py`` per component family:
+
+============== ============================================ =======================================
+seam           protocol                                     implementations (folder: registry)
+============== ============================================ =======================================
+belief         :class:`fusion.belief.Belief`                 ``fusion/``: Gaussian, Trajectory, grids
+sensor         :class:`Sensor`                              ``agent/sensors/``: ``SENSORS``
+exchange       :class:`BeliefExchange`                      ``agent/beliefs/``: ``EXCHANGES``
+planner        :class:`tasking.base.Planner`                ``tasking/``: ``tasking.registry.PLANNERS``
+vehicle        :class:`agent.vehicles.base.Vehicle`         ``agent/vehicles/``
+transport      :class:`Transport`                           ``agent/net/``: Zenoh, bus, radio wrapper
+============== ============================================ =======================================
+
+One step of the host: read the vehicle; every sensor measures (simulated ones first get the step's
+:class:`~agent.sensors.truth.TruthSnapshot`); every exchange absorbs the observations it uses; received
+messages are dispatched to the exchange of their kind; telemetry goes out; every exchange offers its
+message; the planner turns the exchanges' views into a goal.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Protocol
+
+from agent.net.keys import Incoming
+from agent.sensors.truth import TruthSnapshot
+
+#: Observations of one step, by name: ``"bearings"`` (a list of :class:`agent.sensors.bearing.Bearing`),
+#: ``"fire_evidence"`` (a thermal frame's cell evidence), ...
+Observations = Mapping[str, object]
+
+
+class Transport(Protocol):
+    """Bytes on keys (DESIGN.md §5): :class:`agent.net.zenoh_transport.ZenohTransport`,
+    :class:`agent.net.bus.BusEndpoint`, or either inside :class:`agent.net.radio.RadioTransport`."""
+
+    dropped: int  # received samples dropped because the agent fell behind
+
+    def publish(self, key: str, data: bytes) -> None: ...
+
+    def drain(self) -> Iterable[Incoming]: ...
+
+    def alive(self) -> set[str]: ...
+
+    def close(self) -> None: ...
+
+
+class Sensor(Protocol):
+    """Observations from the vehicle state. A simulated sensor draws them from the truth it was given
+    (:meth:`on_truth`, called before every :meth:`measure`); a real one ignores it."""
+
+    def on_truth(self, truth: TruthSnapshot) -> None: ...
+
+    def measure(self, t: float, state) -> Observations: ...
+
+    def telemetry(self) -> dict: ...
+
+    def metrics(self) -> dict: ...
+
+    def close(self) -> None: ...
+
+
+@dataclass
+class Outgoing:
+    """A message an exchange offers. ``prepaid``: the exchange already charged the link budget (entry by
+    entry); otherwise the host admits the whole envelope against it."""
+
+    payload: dict
+    prepaid: bool = False
+
+
+class Outbox(Protocol):
+    """What the host lends an exchange to reach the simulator (raw data for the centralized references:
+    simulation only, counted apart from radio traffic)."""
+
+    def to_simulator(self, kind: str, t: float, payload: dict) -> None: ...
+
+
+class BeliefExchange(Protocol):
+    """One wire kind of belief (``"track"``, ``"grid"``; later ``"particles"``): it owns the local belief,
+    its channel filters and its codec."""
+
+    kind: str
+
+    def sensors(self) -> list[Sensor]:
+        """Sensors this belief brings to the agent beyond the ``[sensor]`` section's (e.g. a thermal camera)."""
+        ...
+
+    def planning_hints(self) -> dict:
+        """Facts a planner of this belief needs when it is built (:class:`tasking.registry.PlanningContext`)."""
+        ...
+
+    def absorb(self, t: float, observations: Observations) -> None:
+        """Update the local belief with this step's observations."""
+        ...
+
+    def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
+        """The message to broadcast now (``None``: nothing due)."""
+        ...
+
+    def sent(self, seq: int, message: Outgoing) -> None:
+        """``message`` left as envelope ``seq``: channel filters may now count on acknowledgements of it."""
+        ...
+
+    def thinned(self, message: Outgoing) -> None:
+        """``message`` did not fit the link budget and was not sent."""
+        ...
+
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool, t: float) -> list[str]:
+        """Decode and fuse a peer's message; returns the fusion method per belief fused. Raises
+        :class:`agent.net.wire.DecodeError` on a bad message, and then changes nothing."""
+        ...
+
+    def view(self) -> object:
+        """A read-only view for planners (:mod:`tasking.base`)."""
+        ...
+
+    def telemetry(self) -> dict:
+        """What the ground station sees of this belief."""
+        ...
+
+    def evaluate(self, t: float, truth: TruthSnapshot) -> None:
+        """Score the belief against the truth (simulation only)."""
+        ...
+
+    def metrics(self) -> dict: ...

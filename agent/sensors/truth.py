@@ -1,0 +1,79 @@
+"""The simulator's truth as an agent receives it: the intake for simulated sensors (DESIGN.md §1, §6).
+
+The world publishes plain data on ``sim/truth`` (:mod:`mesh_sim.world`); the agent never imports the
+simulator. :class:`WorldTruth` keeps the latest message — target states, the fire (decoded only when it
+changed: it changes once per world step, the truth arrives at every agent step), the decoys and the
+UAV positions the radio's range check uses — and hands simulated sensors a :class:`TruthSnapshot` at the
+start of each step. A real deployment has no truth: the snapshot is then empty and only real sensors
+(an external camera) produce observations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.net.fire_truth import decode_fire, decoy
+from agent.net.wire import Envelope
+
+TRUTH_MAX_AGE = 2.0  # s of simulation time; older truth is not extrapolated (chosen here)
+
+
+@dataclass(frozen=True)
+class TruthSnapshot:
+    """What simulated sensors may see at one step: targets extrapolated to the step's time (``None``: no
+    recent truth), and the fire as scene fires plus decoys (hot spot, probability of showing)."""
+
+    targets: list[dict] | None = None
+    fires: list = field(default_factory=list)
+    decoys: list = field(default_factory=list)
+
+
+class WorldTruth:
+    """The latest truth message; the fire is draped on ``terrain``."""
+
+    def __init__(self, terrain):
+        self.terrain = terrain
+        self._targets: tuple[float, list[dict]] | None = None
+        self._fire: tuple[list, list] = ([], [])  # burning cells and decoys, as scene fires
+        self._fire_payload = None  # the (fire, decoys) truth self._fire was decoded from
+        self.uav_positions: dict[str, np.ndarray] = {}
+
+    def accept(self, env: Envelope, me: str) -> None:
+        """Take a truth message; raises :class:`agent.net.wire.DecodeError` on a malformed fire (the rest
+        is kept)."""
+        targets = env.payload.get("targets")
+        if isinstance(targets, list):
+            self._targets = (env.stamp, targets)
+        uavs = env.payload.get("uavs")
+        if isinstance(uavs, dict):  # the simulator's knowledge of where everyone is: the radio's range check
+            self.uav_positions = {k: np.asarray(v, float) for k, v in uavs.items() if k != me}
+        fire_truth = (env.payload.get("fire"), env.payload.get("decoys", []))
+        if fire_truth[0] is not None and fire_truth != self._fire_payload:
+            fire = decode_fire(fire_truth[0], self.terrain)
+            self._fire = (fire.scene_fires(self.terrain), _decoys(fire_truth[1]))
+            self._fire_payload = fire_truth
+
+    def targets_at(self, t: float) -> list[dict] | None:
+        """The latest target states, extrapolated at constant velocity to ``t``."""
+        if self._targets is None or abs(t - self._targets[0]) > TRUTH_MAX_AGE:
+            return None
+        stamp, targets = self._targets
+        dt = t - stamp
+        return [
+            {"id": tg["id"], "position": np.asarray(tg["position"], float) + dt * np.asarray(tg["velocity"], float),
+             "velocity": np.asarray(tg["velocity"], float)}
+            for tg in targets
+        ]
+
+    def at(self, t: float) -> TruthSnapshot:
+        return TruthSnapshot(self.targets_at(t), *self._fire)
+
+
+def _decoys(entries) -> list[tuple[float, float, float]]:
+    """``[[north, east, probability], ...]`` from the truth: hot spots that show in a frame with that
+    probability (malformed entries are ignored: advisory simulation data)."""
+    parsed = [decoy(entry) for entry in (entries if isinstance(entries, list) else [])]
+    return [d for d in parsed if d is not None]
+

@@ -1,0 +1,50 @@
+"""The planner seam (DESIGN.md §4, "plan"): what every planner takes and returns, in the style of Stone
+Soup's tiny ``base.py`` per component family.
+
+A planner is called once per agent cycle with the vehicle's state and the read-only *views* of the
+agent's beliefs, keyed by belief kind (``"track"``: :class:`TrackView`, ``"grid"``: :class:`MapView`),
+and returns a :class:`tasking.orbit.Goal` (plain data; the vehicle turns it into a setpoint). A planner
+reads only the views it needs; a view it needs but the agent does not hold is a configuration error,
+caught when the planner is built (:mod:`tasking.registry`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from tasking.orbit import Goal
+
+
+class VehicleStateLike(Protocol):
+    """What a planner reads of the vehicle: its NED position [m]."""
+
+    position: np.ndarray
+
+
+@dataclass(frozen=True)
+class TrackView:
+    """The agent's confirmed, fused tracks: ``(track id, NED mean position)`` pairs."""
+
+    positions: Sequence[tuple[Hashable, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class MapView:
+    """The agent's certainty grid as a planner sees it: the per-cell probability to plan on (rows, cols),
+    the cells' (north, east) centres (rows, cols, 2) and, for a Beta grid, its ``(alpha, beta)`` counts."""
+
+    probability: np.ndarray
+    centres: np.ndarray
+    beta: tuple[np.ndarray, np.ndarray] | None = None
+
+
+class Planner(Protocol):
+    """One signature for all planners."""
+
+    def plan(self, state: VehicleStateLike, views: Mapping[str, object]) -> Goal:
+        """The goal for this cycle."""
+        ...
