@@ -1,9 +1,9 @@
 """Goals, orbit goals and a talk-free target choice.
 
 :class:`Goal` is what tasking hands to the agent: plain data that the agent turns into its vehicle's
-setpoint (``agent.vehicles.kinematic.goal_to_setpoint``). Tasking never imports ``agent`` (DESIGN §1).
+setpoint (``agent.vehicles.base.goal_to_setpoint``). Tasking never imports ``agent`` (DESIGN §1).
 
-Orbiting the target is how Pierri et al. observe it (spec 004 §2.8): bearing-only sensors on a circle
+Orbiting the target is how Andreetto et al. observe it (spec 004 §2.8): bearing-only sensors on a circle
 centred at the estimated target. The equal spacing of agents on the circle and the rendezvous logic
 (spec 004 §2.9) belong to the full tasking; here every agent simply circles its chosen target.
 

@@ -1,7 +1,7 @@
 """Search patterns: boustrophedon (lawnmower) lanes, random patrol, and a cycling waypoint follower.
 
 Neither source specifies a search pattern: Bethke (spec 000 §2.8) only says a quad-rotor flies "a
-search pattern through the space", and Pierri et al. (spec 004 §2.9) use random point-to-point moves
+search pattern through the space", and Andreetto et al. (spec 004 §2.9) use random point-to-point moves
 inside a 200 x 200 m area. Both are offered here; the lawnmower geometry and its parameters are chosen
 here.
 
@@ -82,7 +82,7 @@ def lawnmower_waypoints(area: Area, spacing: float, altitude: float, lane_index:
 
 
 class RandomPatrol:
-    """Random point-to-point patrol (Pierri et al., spec 004 §2.9): uniform points inside ``area``.
+    """Random point-to-point patrol (Andreetto et al., spec 004 §2.9): uniform points inside ``area``.
 
     ``next_point()`` returns a new ``(north, east)`` point drawn uniformly in the area from a
     ``numpy`` generator seeded with ``seed`` (an int or a sequence of ints), so a run is reproducible.
