@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from agent.beliefs.grid_config import GridConfig
-from agent.beliefs.tracking import TrackerConfig
+from agent.beliefs.tracking_config import TrackerConfig
 from agent.net.link_plan import LinkPlan
 from agent.net.sending import SendConfig
 from agent.sensors.bearing import BearingSensorConfig

@@ -20,7 +20,8 @@ from collections import Counter
 
 import numpy as np
 
-from agent.beliefs.tracking import RemoteTrack, Tracker, TrackerConfig
+from agent.beliefs.tracking import RemoteTrack, Tracker
+from agent.beliefs.tracking_config import TrackerConfig
 from agent.evaluation import TrackEvaluator
 from agent.net import wire
 from agent.net.gaussian_codec import decode_trajectory, encode_trajectory

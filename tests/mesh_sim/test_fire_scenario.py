@@ -81,6 +81,7 @@ def test_rerun_recording_has_every_map_and_the_true_fire(lockstep_run):
         assert rows.get(entity, 0) > 0, (entity, sorted(rows))
 
 
+@pytest.mark.slow
 def test_a_live_fire_run_exchanges_grids_between_processes(tmp_path):
     """Real processes: a Zenoh router, the world, two agents and the observer; grids cross process
     boundaries as deltas and keyframes and are fused."""

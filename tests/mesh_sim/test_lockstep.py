@@ -319,6 +319,7 @@ def bytes_per_second_run(agent: dict, step: float) -> float:
     return agent["bytes_tx"] / (agent["steps"] * step)
 
 
+@pytest.mark.slow
 def test_lockstep_and_live_runs_agree(live_and_lockstep):
     scenario, lock, outcome = live_and_lockstep
     live = outcome.metrics
@@ -344,5 +345,6 @@ def test_lockstep_and_live_runs_agree(live_and_lockstep):
         assert abs(live_value - lockstep_value) <= tolerance * lockstep_value, (name, lockstep_value, live_value)
 
 
+@pytest.mark.slow
 def test_live_comparison_run_leaves_no_process(live_and_lockstep):
     assert_all_gone(live_and_lockstep[2].pids.values())

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from agent.beliefs.particle_init import ParticleInitConfig, ParticleInitiator, back_projection, bearing_mahalanobis
-from agent.beliefs.tracking import Tracker, TrackerConfig
+from agent.beliefs.tracking import Tracker
+from agent.beliefs.tracking_config import TrackerConfig
 from agent.sensors.bearing import Bearing
 from fusion.measurement import los_to_azel
 from perception.terrain import FlatTerrain

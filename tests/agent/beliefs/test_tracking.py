@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from agent.beliefs.tracking import STATE_DIM, RemoteTrack, Tracker, TrackerConfig
+from agent.beliefs.tracking import STATE_DIM, RemoteTrack, Tracker
+from agent.beliefs.tracking_config import TrackerConfig
 from agent.sensors.bearing import BearingSensorConfig, GeometricBearingSensor
 from fusion.measurement import Bearing3D
 from perception.terrain import FlatTerrain
