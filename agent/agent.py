@@ -39,7 +39,6 @@ from tasking.registry import PlanningContext, planner_from_config
 
 log = logging.getLogger("skymesh.agent")
 
-
 class Views(Mapping):
     """The exchanges' views for the planner, each computed only if the planner reads it."""
 
@@ -79,6 +78,7 @@ class Agent:
             index, scenario.agents, scenario.area.as_tuple(), scenario.altitude, seed, frozenset(self.exchanges),
             hints))
         self.topology = Topology(agent_id)
+        self.kinds = wire.KINDS | frozenset(EXCHANGES)  # the wire's kinds and every registered belief kind
         self._now = 0.0
         self.radio = None if plan is None else RadioTransport(
             transport, LinkEmulator(agent_id, plan), lambda: self._now,
@@ -142,7 +142,7 @@ class Agent:
         if parts[:2] == ("sim", "truth"):
             origin = None  # the world publishes truth under its own name, not under the key
         try:
-            env = wire.decode(item.data, expected_origin=origin, key=self.fleet_key)
+            env = wire.decode(item.data, expected_origin=origin, key=self.fleet_key, kinds=self.kinds)
         except wire.DecodeError as err:
             return self._reject(origin or "world", err.reason)
         seen = self._last_seq.get((env.origin, env.kind))
@@ -178,7 +178,7 @@ class Agent:
     def _seal(self, kind: str, t: float, payload: dict) -> tuple[int, bytes]:
         self._seq += 1
         env = wire.Envelope(kind=kind, origin=self.id, seq=self._seq, stamp=t, payload=payload)
-        return self._seq, wire.encode(env, self.fleet_key)
+        return self._seq, wire.encode(env, self.fleet_key, kinds=self.kinds)
 
     def _send(self, key: str, kind: str, data: bytes) -> None:
         self.transport.publish(key, data)

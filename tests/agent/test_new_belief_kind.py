@@ -1,0 +1,96 @@
+"""A belief kind the host has never heard of joins by one registry line: a toy exchange (each agent counts
+its steps and keeps the largest count a peer reported) is registered, and agents over the in-memory bus
+send, receive, dispatch, reject and report it without a change to the host."""
+
+from __future__ import annotations
+
+import uuid
+
+import pytest
+
+from agent import beliefs
+from agent.agent import Agent
+from agent.config import AgentScenario
+from agent.net import wire
+from agent.net.bus import InMemoryBus
+from agent.net.keys import Keys
+from agent.plugins import Outgoing
+
+
+class CountExchange:
+    kind = "count"
+
+    def __init__(self):
+        self.steps, self.largest = 0, {}
+
+    def sensors(self):
+        return []
+
+    def planning_hints(self):
+        return {}
+
+    def absorb(self, t, observations):
+        self.steps += 1
+
+    def outgoing(self, t, neighbours):
+        return Outgoing({"count": self.steps})
+
+    def sent(self, seq, message):
+        pass
+
+    def thinned(self, message):
+        pass
+
+    def receive(self, origin, seq, stamp, payload, tree_edge, t):
+        if not isinstance(payload.get("count"), int):
+            raise wire.DecodeError("bad_field", "count must be an integer")
+        self.largest[origin] = max(payload["count"], self.largest.get(origin, 0))
+        return ["count_max"]
+
+    def view(self):
+        return dict(self.largest)
+
+    def telemetry(self):
+        return {}
+
+    def evaluate(self, t, truth):
+        pass
+
+    def metrics(self):
+        return {"count": {"steps": self.steps, "largest": dict(self.largest)}}
+
+
+@pytest.fixture
+def fleet(monkeypatch):
+    monkeypatch.setitem(beliefs.EXCHANGES, "count", lambda ctx: CountExchange())
+    scenario = AgentScenario(agents=3, duration=2.0)
+    keys = Keys(f"count-{uuid.uuid4().hex[:8]}")
+    bus = InMemoryBus()
+    subscribe = [f"{keys.root}/belief/**", keys.telemetry("*"), keys.sim("truth")]
+    agents = [Agent(f"uav{i}", i, scenario, bus.endpoint(f"uav{i}", subscribe), keys, seed=i) for i in range(3)]
+    return agents, bus.endpoint("intruder", []), keys
+
+
+def test_a_registered_belief_kind_is_exchanged_and_reported(fleet):
+    agents, _, _ = fleet
+    for k in range(10):
+        for agent in agents:
+            agent.step(0.2 * k)
+    for agent in agents:
+        metrics = agent.metrics()
+        assert metrics["count"]["steps"] == 10
+        peers = {a.id for a in agents} - {agent.id}
+        assert set(metrics["count"]["largest"]) == peers
+        assert all(n >= 9 for n in metrics["count"]["largest"].values())
+        assert metrics["fusions"]["count_max"] >= 18
+        assert metrics["bytes_tx_by_kind"]["count"] > 0
+
+
+def test_a_malformed_message_of_the_new_kind_is_rejected_by_reason(fleet):
+    """Bad input: a "count" message whose count is a string."""
+    agents, intruder, keys = fleet
+    bad = wire.Envelope(kind="count", origin="uav9", seq=1, stamp=0.0, payload={"count": "many"})
+    intruder.publish(keys.belief("count", "uav9"), wire.encode(bad, kinds=wire.KINDS | {"count"}))
+    agents[0].step(0.0)
+    assert agents[0].metrics()["rejected_by_reason"] == {"bad_field": 1}
+    assert agents[0].exchanges["count"].largest == {}
