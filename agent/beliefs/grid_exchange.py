@@ -6,10 +6,12 @@ ours that every current neighbour has acknowledged decoding (:mod:`agent.net.gri
 the last messages they decoded from each origin, so they can rebuild the full grid from the baseline.
 
 * **Sender** (:class:`GridSender`): remembers the quantized layers of its recent messages and, per
-  neighbour, the newest of its messages that neighbour acknowledged. The baseline of a broadcast is the
-  oldest acknowledgement among the current neighbours; a keyframe is sent when a neighbour has
-  acknowledged nothing yet (or its acknowledgement is no longer in the history), and every
-  ``keyframe_every`` messages so that late joiners and observers catch up.
+  neighbour, which of them that neighbour acknowledged. The baseline of a broadcast is the newest message
+  that *every* current neighbour acknowledged (the oldest of their latest acknowledgements whenever each
+  of them acknowledged that message); a keyframe is sent when there is none still in the history, and every
+  ``keyframe_every`` messages so that late joiners and observers catch up. An acknowledgement of a newer
+  message is no proof of an older one: with independent losses, a neighbour that acknowledged message 3
+  may have missed message 2, the one another neighbour acknowledged last.
 * **Receiver** (:class:`GridReceiver`): per origin, the layers of the messages it decoded (for the next
   deltas) and the newest one it decoded — the acknowledgement it gives back in its own grid messages.
 
@@ -17,6 +19,13 @@ Losing a message loses no update: every message carries the sender's whole curre
 against something the receiver provably holds), so the next one that arrives brings everything. A
 delta on a baseline the receiver does not hold is rejected (``grid_missing_baseline``) and costs one
 period, never a wrong grid.
+
+"Provably holds" needs a receiver history at least as long as the sender's (both are :data:`HISTORY`):
+a baseline is still among the sender's last ``history`` messages, so fewer than ``history`` messages
+followed it, and a receiver that decoded it (its acknowledgement says so) keeps its last ``history``
+decoded ones. With a shorter receiver history, lost acknowledgements can keep the sender on a baseline
+the receiver has since dropped: its deltas are rejected until an acknowledgement gets through or the
+baseline leaves the sender's history (a keyframe follows).
 """
 
 from __future__ import annotations
@@ -41,24 +50,24 @@ class GridSender:
         self.keyframe_every = keyframe_every
         self.delta = delta
         self.sent = GridHistory(history)
-        self.acked: dict[str, int] = {}  # neighbour -> newest of our messages it decoded
+        self.held: dict[str, set[int]] = {}  # neighbour -> our messages in self.sent it acknowledged decoding
         self._since_keyframe = keyframe_every  # the first message is a keyframe
 
     def acknowledge(self, peer: str, seq: int) -> None:
         """``peer`` says it decoded our message ``seq``."""
-        if seq > self.acked.get(peer, -1):
-            self.acked[peer] = seq
+        if self.sent.get(seq) is not None:
+            self.held.setdefault(peer, set()).add(seq)
 
     def baseline(self, neighbours: Iterable[str]) -> tuple[int, np.ndarray] | None:
-        """The message every neighbour holds (the oldest acknowledgement among them), or ``None``."""
+        """The newest message every neighbour acknowledged, so holds, that is still in the history, or ``None``."""
         if not self.delta or self._since_keyframe + 1 >= self.keyframe_every:
             return None
         neighbours = list(neighbours)
-        if not neighbours or any(p not in self.acked for p in neighbours):
+        if not neighbours or any(p not in self.held for p in neighbours):
             return None
-        base = min(self.acked[p] for p in neighbours)
-        layers = self.sent.get(base)
-        return None if layers is None else (base, layers)
+        common = set.intersection(*(self.held[p] for p in neighbours))
+        base = max((seq for seq in common if self.sent.get(seq) is not None), default=None)
+        return None if base is None else (base, self.sent.get(base))
 
     def encode(self, layers: np.ndarray, neighbours: Iterable[str]) -> tuple[dict, np.ndarray]:
         """The codec payload of ``layers`` for the current neighbours, and the quantized layers the
@@ -70,6 +79,8 @@ class GridSender:
     def sent_as(self, seq: int, quantized: np.ndarray, payload: dict) -> None:
         """Record that message ``seq`` left with ``payload`` (call only for messages actually sent)."""
         self.sent.put(seq, quantized)
+        for peer, held in self.held.items():  # forget acknowledgements of messages that left the history
+            self.held[peer] = {s for s in held if self.sent.get(s) is not None}
         self._since_keyframe = 0 if payload.get("mode") == "key" else self._since_keyframe + 1
 
 

@@ -13,7 +13,7 @@ import zlib
 import msgpack
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from agent.net import wire
@@ -312,7 +312,8 @@ def simulate_lossy_link(seed: int, steps: int, loss: float, max_delay: int, L: i
     receiver acknowledged (a keyframe before any acknowledgement or once that message left its history).
     Receiver: acknowledges every message it decodes; messages and acknowledgements are lost with
     probability ``loss``; an acknowledgement arrives 1..max_delay steps later. A delta whose baseline the
-    receiver no longer holds (a history shorter than the acknowledgement delay) is rejected, never applied.
+    receiver no longer holds (its history shorter than the sender's, or than the acknowledgement delay) is
+    rejected, never applied.
     After ``steps`` the grid stops changing and the sender keeps sending until a message is decoded.
     Returns counters of decoded keyframes/deltas, lost messages and missing baselines."""
     rng = np.random.default_rng(seed)
@@ -380,10 +381,20 @@ def test_a_receiver_that_forgot_the_baseline_rejects_the_delta_and_catches_up():
 @given(seed=st.integers(0, 2**32 - 1), steps=st.integers(1, 30), loss=st.floats(0.0, 0.8),
        max_delay=st.integers(1, 6), L=st.sampled_from([1, 2]), rows=st.integers(1, 12), cols=st.integers(1, 12),
        capacity=st.integers(1, 8), receiver_capacity=st.integers(1, 8))
+@example(seed=343, steps=4, loss=0.25, max_delay=1, L=1, rows=3, cols=6, capacity=4, receiver_capacity=2)
 def test_property_no_update_is_lost(seed, steps, loss, max_delay, L, rows, cols, capacity, receiver_capacity):
+    """Always (inside simulate_lossy_link): every decoded grid is the sender's, exactly, and the first message
+    that arrives after the grid stops changing brings all of it. No delta is rejected for a missing baseline
+    when the receiver remembers as many messages as the sender (the sender's baseline is among its last
+    ``capacity`` messages, the receiver decoded it and keeps its last ``receiver_capacity >= capacity``), nor
+    without loss when it remembers ``max_delay`` (every acknowledgement then arrives within ``max_delay``
+    steps). The acknowledgement delay alone bounds nothing under loss: lost acknowledgements keep the sender
+    on an old baseline while the receiver decodes newer messages and drops it (the explicit example: receiver
+    history 2 < sender history 4, delay 1; message 1 and the acknowledgements of messages 2 and 3 lost, so
+    message 4 is a delta on message 0, which the receiver dropped when it decoded 3)."""
     counts = simulate_lossy_link(seed, steps, loss, max_delay, L, (rows, cols), capacity, receiver_capacity)
-    if receiver_capacity > max_delay:
-        assert counts["missing"] == 0
+    if receiver_capacity >= capacity or (loss == 0.0 and receiver_capacity >= max_delay):
+        assert counts["missing"] == 0, counts
 
 
 # -- bad input: one defect per message ---------------------------------------------------------------
