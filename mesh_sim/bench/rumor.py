@@ -162,15 +162,17 @@ def _stop_on_divergence(limit: int | None = None) -> Iterator[_Guard]:
     class GuardedAgent(base_agent):
         def step(self, t: float) -> None:
             if guard.stopped_at is not None:
-                self.transport.drain()
+                for _ in self.transport.drain():  # a radio transport drains lazily
+                    pass
                 return
             try:
                 super().step(t)
             except Exception as err:  # noqa: BLE001 - reported per run, the run's scores up to here are kept
                 guard.stopped_at, guard.error = t, f"{self.id}: {_where(err)}"
                 return
-            guard.max_tracks = max(guard.max_tracks, len(self.tracker.tracks))
-            if len(self.tracker.tracks) > limit:
+            tracks = len(self.exchanges["track"].tracker.tracks)
+            guard.max_tracks = max(guard.max_tracks, tracks)
+            if tracks > limit:
                 guard.stopped_at = t
 
     class GuardedWorld(base_world):
