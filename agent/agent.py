@@ -24,6 +24,7 @@ from collections.abc import Iterator, Mapping
 
 from agent.beliefs import EXCHANGES, ExchangeContext
 from agent.config import AgentScenario
+from agent.fusion_log import FusionLog
 from agent.net import wire
 from agent.net.keys import Incoming, Keys
 from agent.net.link_emulator import LinkEmulator
@@ -88,7 +89,7 @@ class Agent:
         self.sim_bytes_tx: Counter = Counter()  # kind -> bytes of simulation-only data (for the oracles)
         self.bytes_rx: Counter = Counter()  # (peer, kind) -> bytes
         self.rejected: Counter = Counter()  # reason -> messages
-        self.fusions: Counter = Counter()  # method -> beliefs fused
+        self.fusions = FusionLog()
         self.telemetry_thinned = 0
         self.steps = 0
         self._seq = 0
@@ -164,9 +165,10 @@ class Agent:
             return None
         tree_edge = self.topology.is_tree_edge(env.origin, t)
         try:
-            self.fusions.update(exchange.receive(env.origin, env.seq, env.stamp, env.payload, tree_edge, t))
+            fused = exchange.receive(env.origin, env.seq, env.stamp, env.payload, tree_edge, t)
         except wire.DecodeError as err:
-            self._reject(env.origin, err.reason)
+            return self._reject(env.origin, err.reason)
+        self.fusions.record(env.origin, t, fused)
 
     def _reject(self, peer: str, reason: str, log_it: bool = True) -> None:
         self.rejected[reason] += 1
@@ -226,7 +228,7 @@ class Agent:
             "bytes_rx_by_peer": _by_peer(self.bytes_rx),
             "msgs_rejected": int(sum(v for k, v in self.rejected.items() if k != "duplicate")),
             "rejected_by_reason": dict(self.rejected),
-            "fusions": dict(self.fusions),
+            **self.fusions.metrics(),
             "radio_drops": _by_peer(drops),
             "radio_drops_by_cause": dict(Counter(cause for (_, cause) in drops.elements())),
             "telemetry_thinned": self.telemetry_thinned,

@@ -110,8 +110,10 @@ class BeliefExchange(Protocol):
         """``message`` did not fit the link budget and was not sent."""
         ...
 
-    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool, t: float) -> list[str]:
-        """Decode and fuse a peer's message; returns the fusion method per belief fused. Raises
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool,
+                t: float) -> list[tuple[str, str | None]]:
+        """Decode and fuse a peer's message; returns ``(method, cause)`` per belief fused, the cause of a
+        fusion that was not exact (:data:`fusion.channel_filter.CAUSES`) or ``None``. Raises
         :class:`agent.net.wire.DecodeError` on a bad message, and then changes nothing."""
         ...
 

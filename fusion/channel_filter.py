@@ -55,13 +55,26 @@ class Policy(StrEnum):
     HYBRID = "hybrid"
 
 
+#: Why a receive was not fused exactly (``Received.cause``).
+CAUSES = (
+    "policy",  # the policy is ci or naive: nothing is ever fused exactly
+    "not_tree_edge",  # hybrid: the link may lie on a loop
+    "common_unknown",  # the channel was desynchronised earlier: its common information is unknown
+    "ack_not_in_history",  # the acknowledged message is older than the kept history
+    "exact_failed",  # the exact result would not be a valid belief (e.g. not positive semi-definite)
+    "stale",  # a message not newer than the last one on this channel: ignored
+)
+
+
 @dataclass
 class Received:
-    """The outcome of one receive: the fused belief, how it was fused, and why (for fallbacks)."""
+    """The outcome of one receive: the fused belief, how it was fused, and — for anything but an exact
+    fusion — why: ``cause`` (one of :data:`CAUSES`) and a human-readable ``reason``."""
 
     fused: Belief
     method: str  # "exact", "ci", "naive" or "stale"
     reason: str | None = None
+    cause: str | None = None
 
 
 @dataclass
@@ -173,7 +186,7 @@ class ChannelFilter:
         communication graph) — ``hybrid`` uses intersection on any other edge."""
         ch = self._channel(neighbour)
         if seq is not None and ch.last_seq is not None and seq <= ch.last_seq:
-            return Received(local, "stale", f"message {seq} is not newer than {ch.last_seq}")
+            return Received(local, "stale", f"message {seq} is not newer than {ch.last_seq}", "stale")
         if seq is not None:
             ch.last_seq = seq
         epoch = _newest_epoch(local, received)
@@ -181,14 +194,14 @@ class ChannelFilter:
         self._prior_at(epoch)
 
         if self.policy is Policy.NAIVE:
-            return Received(local.fuse(received).remove(self._prior_at(epoch)), "naive")
+            return Received(local.fuse(received).remove(self._prior_at(epoch)), "naive", cause="policy")
         if self.policy is Policy.CI:
-            return Received(self.intersect(local, received), "ci")
+            return Received(self.intersect(local, received), "ci", cause="policy")
         if self.policy is Policy.HYBRID and not tree_edge:
             ch.synchronized = False
-            return Received(self.intersect(local, received), "ci", "not a tree edge")
+            return Received(self.intersect(local, received), "ci", "not a tree edge", "not_tree_edge")
         if not ch.synchronized:
-            return Received(self.intersect(local, received), "ci", "common information unknown")
+            return Received(self.intersect(local, received), "ci", "common information unknown", "common_unknown")
         return self._exact(ch, local, received, acked_seq, epoch)
 
     def _exact(self, ch: _Channel, local, received, acked_seq, epoch) -> Received:
@@ -201,8 +214,8 @@ class ChannelFilter:
         else:
             ch.synchronized = False
             return Received(
-                self.intersect(local, received), "ci", f"acknowledged message {acked_seq} is not in the history"
-            )
+                self.intersect(local, received), "ci", f"acknowledged message {acked_seq} is not in the history",
+                "ack_not_in_history")
         try:
             if ours_there is None:
                 common, new_inbound = inbound, received
@@ -213,7 +226,7 @@ class ChannelFilter:
             fused = local.fuse(received).remove(common)
         except ValueError as err:
             ch.synchronized = False
-            return Received(self.intersect(local, received), "ci", f"exact fusion failed: {err}")
+            return Received(self.intersect(local, received), "ci", f"exact fusion failed: {err}", "exact_failed")
         ch.inbound = new_inbound
         return Received(fused, "exact")
 

@@ -61,6 +61,7 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
             "rmse_ratio_to_oracle": rmse / oracle_rmse if rmse is not None and oracle_rmse else None,
             "bytes_per_agent_per_s": float(np.mean(tx)) / sc.duration if tx else None,
             "targets_tracked_by_every_agent": _tracked_by_all(agents, scenario),
+            "exact_share": _exact_share(agents),
         },
         "config": {**scenario.raw, "speed": speed},
     }
@@ -123,6 +124,13 @@ def grid_table(metrics: dict) -> Table | None:
     return table
 
 
+def _exact_share(agents: list[dict]) -> float | None:
+    """The share of received track beliefs fused exactly (the rest by intersection), over the fleet."""
+    exact = sum(a.get("fusions", {}).get("exact", 0) for a in agents)
+    ci = sum(a.get("fusions", {}).get("ci", 0) for a in agents)
+    return exact / (exact + ci) if exact + ci else None
+
+
 def _tails(targets: list[dict]) -> list[dict]:
     return [t["tail"] for t in targets if isinstance(t.get("tail"), dict)]
 
@@ -138,27 +146,28 @@ def _fmt(value, spec: str) -> str:
 
 def summary_table(metrics: dict) -> Table:
     table = Table(title=f"skymesh run — {metrics['status']}")
-    for col in ("agent", "RMSE [m]", "ANEES", "targets", "first track [s]", "bytes/s", "radio drops", "rejected",
-                "deadline misses"):
+    for col in ("agent", "RMSE [m]", "ANEES", "targets", "first track [s]", "exact", "bytes/s", "radio drops",
+                "rejected", "deadline misses"):
         table.add_column(col, justify="right")
     duration = metrics["config"]["duration"]
     for a in metrics["agents"]:
         if "targets" not in a:
-            table.add_row(a["id"], a.get("status", "?"), *["-"] * 7)
+            table.add_row(a["id"], a.get("status", "?"), *["-"] * 8)
             continue
         rmse, anees = pooled(a["targets"])
         firsts = [t["time_to_first_track"] for t in a["targets"] if t["time_to_first_track"] is not None]
         tracked = sum(t["rmse"] is not None for t in a["targets"])
         table.add_row(
             a["id"], _fmt(rmse, ".2f"), _fmt(anees, ".2f"), f"{tracked}/{len(a['targets'])}",
-            _fmt(max(firsts) if firsts else None, ".1f"), f"{a['bytes_tx'] / duration:,.0f}",
+            _fmt(max(firsts) if firsts else None, ".1f"), _fmt(a.get("exact_share"), ".0%"),
+            f"{a['bytes_tx'] / duration:,.0f}",
             _drops(a.get("radio_drops_by_cause", {})), str(a["msgs_rejected"]), str(a.get("deadline_misses", "-")),
         )
     o, f = metrics["oracle"], metrics["fleet"]
-    table.add_row("oracle", _fmt(o["rmse"], ".2f"), _fmt(o["anees"], ".2f"), "", "", "", "", "", "", style="dim")
+    table.add_row("oracle", _fmt(o["rmse"], ".2f"), _fmt(o["anees"], ".2f"), *[""] * 7, style="dim")
     table.add_row("fleet", _fmt(f["rmse"], ".2f"), _fmt(f["anees"], ".2f"),
-                  f"ratio {_fmt(f['rmse_ratio_to_oracle'], '.2f')}", "", _fmt(f["bytes_per_agent_per_s"], ",.0f"),
-                  "", "", "", style="bold")
+                  f"ratio {_fmt(f['rmse_ratio_to_oracle'], '.2f')}", "", _fmt(f.get("exact_share"), ".0%"),
+                  _fmt(f["bytes_per_agent_per_s"], ",.0f"), "", "", "", style="bold")
     return table
 
 

@@ -144,7 +144,8 @@ class GridExchange:
     def thinned(self, message: Outgoing) -> None:
         self.grids_thinned += 1
 
-    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool, t: float) -> list[str]:
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool,
+                t: float) -> list[tuple[str, str | None]]:
         """Decode and fuse a neighbour's grid message. Raises :class:`agent.net.wire.DecodeError` on a bad
         message (nothing is changed then)."""
         if not isinstance(payload, dict) or payload.get("belief") != self.config.belief:
@@ -167,7 +168,7 @@ class GridExchange:
         out = self.channels.on_receive(origin, self.grid, received, ours, seq, tree_edge)
         self.grid = out.fused
         self.fusions[out.method] += 1
-        return [f"grid_{out.method}"]
+        return [(f"grid_{out.method}", out.cause)]
 
     # -- views and results ------------------------------------------------------------------------
     def view(self) -> MapView:

@@ -101,11 +101,12 @@ class TrackExchange:
         """Never called: track entries are charged to the budget one by one when chosen."""
 
     # -- receiving --------------------------------------------------------------------------------
-    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool, t: float) -> list[str]:
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool,
+                t: float) -> list[tuple[str, str | None]]:
         remote = self._decode(payload)
         if any(r.belief.epoch > self.tracker.epoch + FUTURE_EPOCHS for r in remote):
             raise wire.DecodeError("future_epoch", f"a track more than {FUTURE_EPOCHS} steps ahead of ours")
-        methods = [out.method for out in self.tracker.fuse_remote(origin, remote, seq, tree_edge)]
+        methods = [(out.method, out.cause) for out in self.tracker.fuse_remote(origin, remote, seq, tree_edge)]
         self.latencies.append(t - stamp)
         return methods
 

@@ -45,7 +45,7 @@ class CountExchange:
         if not isinstance(payload.get("count"), int):
             raise wire.DecodeError("bad_field", "count must be an integer")
         self.largest[origin] = max(payload["count"], self.largest.get(origin, 0))
-        return ["count_max"]
+        return [("count_max", None)]
 
     def view(self):
         return dict(self.largest)

@@ -172,7 +172,7 @@ def test_decentralized_fusion_equals_the_oracle_on_a_tree(policy, topology):
         assert track.belief.epoch == oracle.belief.epoch == fleet.k - 1
         errors = exactness_errors(track, oracle)
         assert max(errors.values()) < 1e-9, (agent.id, errors)
-        assert set(agent.fusions) == {"exact"}, (agent.id, agent.fusions)
+        assert set(agent.fusions.by_method) == {"exact"}, (agent.id, agent.fusions.metrics())
 
 
 def test_naive_fusion_on_a_tree_is_overconfident():
