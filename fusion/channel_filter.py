@@ -109,6 +109,7 @@ class ChannelFilter:
         self.history = history
         self._channels: dict[Hashable, _Channel] = {}
         self._sent: OrderedDict = OrderedDict()  # seq -> the local belief broadcast as that message
+        self._pruned = False  # has the oldest sent entry ever been dropped?
 
     # -- bookkeeping ------------------------------------------------------------------------------
     def neighbours(self) -> list:
@@ -145,6 +146,7 @@ class ChannelFilter:
         self._sent[seq] = local
         if len(self._sent) > self.history:
             self._sent.popitem(last=False)
+            self._pruned = True
         for ch in self._channels.values():
             ch.inbound_at_send[seq] = ch.inbound
             if len(ch.inbound_at_send) > self.history:
@@ -159,6 +161,11 @@ class ChannelFilter:
         if ch.opened_after is not None and seq <= ch.opened_after:
             return self._sent[seq], self._latest_prior
         return None
+
+    def _predates(self, seq: int) -> bool:
+        """Was message ``seq`` sent before this filter sent anything? (Its belief was not in it: e.g. the
+        neighbour acknowledges a copy of a track this node deleted before it started this one.)"""
+        return not self._pruned and (not self._sent or seq < next(iter(self._sent)))
 
     def _prior_at(self, epoch):
         """The common prior at ``epoch`` (advanced incrementally: a trajectory prior is the same chain
@@ -207,8 +214,8 @@ class ChannelFilter:
     def _exact(self, ch: _Channel, local, received, acked_seq, epoch) -> Received:
         inbound = ch.inbound.advanced_to(epoch)
         entry = None if acked_seq is None else self._sent_entry(ch, acked_seq)
-        if acked_seq is None:
-            ours_there = None
+        if acked_seq is None or (entry is None and self._predates(acked_seq)):
+            ours_there = None  # the neighbour holds nothing this filter sent
         elif entry is not None:
             ours_there = (entry[0].advanced_to(epoch), entry[1].advanced_to(epoch))
         else:
@@ -218,17 +225,27 @@ class ChannelFilter:
                 "ack_not_in_history")
         try:
             if ours_there is None:
-                common, new_inbound = inbound, received
+                new_inbound = received
+                fused = local.fuse(received).remove(inbound)
             else:
                 sent_local, sent_inbound = ours_there
-                common = inbound.fuse(sent_local).remove(sent_inbound)  # B + A
-                new_inbound = received.fuse(sent_inbound).remove(sent_local)  # m - A
-            fused = local.fuse(received).remove(common)
+                # Only the fused belief is validated. m - A is a bookkeeping term (Merino's predicted common
+                # information, (3.41)-(3.42)) assembled from beliefs marginalised ((3.31)-(3.32)) at different
+                # epochs with different information; Schur complements are not linear, so it need not be
+                # positive semi-definite even when the fusion itself is (issue 11).
+                new_inbound = _difference(received.fuse(sent_inbound), sent_local)  # m - A
+                fused = local.fuse(received).fuse(sent_inbound).remove(inbound.fuse(sent_local))  # L + m - (B + A)
         except ValueError as err:
             ch.synchronized = False
             return Received(self.intersect(local, received), "ci", f"exact fusion failed: {err}", "exact_failed")
         ch.inbound = new_inbound
         return Received(fused, "exact")
+
+
+def _difference(a, b):
+    """``a - b`` for a bookkeeping term that is not itself a belief: unchecked where the belief allows it."""
+    difference = getattr(a, "difference", None)
+    return a.remove(b) if difference is None else difference(b)
 
 
 def _newest_epoch(a, b):

@@ -180,6 +180,12 @@ class Trajectory:
             raise ValueError("removing more information than the trajectory holds (result is indefinite)")
         return Trajectory(self.y - common.y, Y, self.epoch, self.model)
 
+    def difference(self, other: Trajectory) -> Trajectory:
+        """``remove`` without the positive semi-definite check, for channel-filter bookkeeping terms
+        (:mod:`fusion.channel_filter`): after marginalisation they are only approximately valid beliefs."""
+        self._check_aligned(other)
+        return Trajectory(self.y - other.y, self.Y - other.Y, self.epoch, self.model)
+
     def intersect(self, other: Trajectory, omega: float) -> Trajectory:
         self._check_aligned(other)
         if not 0.0 <= omega <= 1.0:
