@@ -14,17 +14,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from perception.degradation import Degradation
+from perception.degradation import CONDITIONS, Degradation
 from perception.evaluation import detection_rates, segmentation_rates, sequence
-
-CONDITIONS = {
-    "clean": Degradation(),
-    "banding 50%": Degradation(banding_prob=0.5),
-    "speckles 2/frame": Degradation(speckle_rate=2.0),
-    "failed: snow": Degradation(failed="snow"),
-    "failed: black": Degradation(failed="black"),
-    "failed: bands": Degradation(failed="banding"),
-}
 
 
 def _detector_rows(n_frames: int, width: int, height: int) -> list[tuple]:

@@ -4,18 +4,10 @@ from __future__ import annotations
 
 from functools import cache
 
-from perception.degradation import Degradation
+from perception.degradation import CONDITIONS
 from perception.evaluation import sequence
 
 N_FRAMES = 40
-CONDITIONS = {
-    "clean": Degradation(),
-    "banding": Degradation(banding_prob=0.5),
-    "speckles": Degradation(speckle_rate=2.0),
-    "snow": Degradation(failed="snow"),
-    "black": Degradation(failed="black"),
-    "bands": Degradation(failed="banding"),
-}
 FAILED = ("snow", "black", "bands")
 
 
