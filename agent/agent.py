@@ -149,26 +149,26 @@ class Agent:
         seen = self._last_seq.get((env.origin, env.kind))
         if seen is not None and env.seq <= seen:
             return self._reject(env.origin, "duplicate", log_it=False)
-        self._last_seq[(env.origin, env.kind)] = env.seq
+        try:
+            self._use(env, len(item.data), t)
+        except wire.DecodeError as err:
+            return self._reject(env.origin, err.reason)
+        self._last_seq[(env.origin, env.kind)] = env.seq  # only a message that was used moves the window
+
+    def _use(self, env: wire.Envelope, size: int, t: float) -> None:
+        """Apply a decoded message: truth to the intake, beliefs to the exchange of their kind."""
         if env.kind == "truth":
-            try:
-                return self.world.accept(env, self.id)
-            except wire.DecodeError as err:
-                return self._reject("world", err.reason)
-        self.bytes_rx[(env.origin, env.kind)] += len(item.data)
+            return self.world.accept(env, self.id)
+        self.bytes_rx[(env.origin, env.kind)] += size
         if env.kind == "telemetry" or env.kind in EXCHANGES:
             self.topology.heard(env.origin, t)
         if env.kind == "telemetry":
             self.topology.learn(env.payload.get("topology"))
         exchange = self.exchanges.get(env.kind)
-        if exchange is None:
-            return None
-        tree_edge = self.topology.is_tree_edge(env.origin, t)
-        try:
-            fused = exchange.receive(env.origin, env.seq, env.stamp, env.payload, tree_edge, t)
-        except wire.DecodeError as err:
-            return self._reject(env.origin, err.reason)
-        self.fusions.record(env.origin, t, fused)
+        if exchange is not None:
+            tree_edge = self.topology.is_tree_edge(env.origin, t)
+            self.fusions.record(env.origin, t, exchange.receive(env.origin, env.seq, env.stamp, env.payload,
+                                                                tree_edge, t))
 
     def _reject(self, peer: str, reason: str, log_it: bool = True) -> None:
         self.rejected[reason] += 1

@@ -1,0 +1,50 @@
+"""The agent's receive path: a message is de-duplicated by (origin, kind, seq), and only a message that was
+used moves that window — a rejected payload with a large sequence number cannot silence its sender
+(reliability audit: "the sequence number is recorded before the payload is checked")."""
+
+from __future__ import annotations
+
+import uuid
+
+from agent.agent import Agent
+from agent.config import AgentScenario
+from agent.net import wire
+from agent.net.bus import InMemoryBus
+from agent.net.keys import Keys
+
+
+def setup():
+    keys = Keys(f"rx-{uuid.uuid4().hex[:8]}")
+    bus = InMemoryBus()
+    subscribe = [f"{keys.root}/belief/**", keys.telemetry("*"), keys.sim("truth")]
+    agent = Agent("uav0", 0, AgentScenario(agents=2), bus.endpoint("uav0", subscribe), keys, seed=0)
+    return agent, bus.endpoint("sender", []), keys
+
+
+def send(endpoint, key: str, kind: str, origin: str, seq: int, payload: dict) -> None:
+    endpoint.publish(key, wire.encode(wire.Envelope(kind=kind, origin=origin, seq=seq, stamp=0.0, payload=payload)))
+
+
+def test_a_rejected_track_message_does_not_move_the_sequence_window():
+    """Bad input: track payloads that are not lists, the first with sequence number 10**9."""
+    agent, sender, keys = setup()
+    send(sender, keys.belief("track", "uav1"), "track", "uav1", 10**9, {"tracks": "not a list"})
+    send(sender, keys.belief("track", "uav1"), "track", "uav1", 5, {"tracks": 7})
+    agent.step(0.0)
+    assert agent.rejected == {"bad_field": 2}  # the second is judged on its payload, not as a "duplicate"
+    send(sender, keys.belief("track", "uav1"), "track", "uav1", 6, {"tracks": []})
+    send(sender, keys.belief("track", "uav1"), "track", "uav1", 6, {"tracks": []})
+    agent.step(0.2)
+    assert agent.rejected == {"bad_field": 2, "duplicate": 1}  # a used message does move it
+
+
+def test_a_rejected_truth_does_not_hide_the_next_one():
+    """Bad input: a truth message whose fire state is not zlib data, with a huge sequence number."""
+    agent, sender, keys = setup()
+    bad_fire = {"origin": [0.0, 0.0], "cell": 5.0, "shape": [2, 2], "state": b"not zlib"}
+    send(sender, keys.sim("truth"), "truth", "world", 10**9, {"fire": bad_fire})
+    target = {"id": "car", "position": [1.0, 2.0, 0.0], "velocity": [0.0, 0.0, 0.0]}
+    send(sender, keys.sim("truth"), "truth", "world", 3, {"targets": [target]})
+    agent.step(0.0)
+    assert agent.rejected == {"bad_fire": 1}
+    assert [t["id"] for t in agent.world.targets_at(0.0)] == ["car"]
