@@ -29,10 +29,24 @@ from agent.net.sending import SendScheduler
 from agent.plugins import Observations, Outbox, Outgoing
 from agent.sensors.bearing import Bearing
 from agent.sensors.truth import TruthSnapshot
+from fusion.gaussian import UninformativeBeliefError
 from tasking.base import TrackView
 
 FUTURE_EPOCHS = 50  # a peer's belief this many steps ahead of ours is rejected as a clock fault (chosen here)
 TRACK_ENTRY_BYTES = 5000  # budget charged per track sent: an 8-state trajectory encodes to ~4.8 kB
+
+
+def _check_observable(belief) -> None:
+    """A shared track must say where its target is: the newest state's marginal needs a finite mean and
+    covariance (an all-zero or vanishingly small information matrix would break association and planning
+    later); ``DecodeError("uninformative")`` otherwise."""
+    try:
+        current = belief.current()
+        ok = bool(np.all(np.isfinite(current.mean)) and np.all(np.isfinite(current.cov)))
+    except (UninformativeBeliefError, np.linalg.LinAlgError, FloatingPointError, ValueError) as err:
+        raise wire.DecodeError("uninformative", f"a track whose newest state is not observable: {err}") from None
+    if not ok:
+        raise wire.DecodeError("uninformative", "a track whose newest state has a non-finite mean or covariance")
 
 
 class TrackExchange:
@@ -124,6 +138,7 @@ class TrackExchange:
             if not isinstance(acks, dict) or not all(isinstance(v, int) and v >= 0 for v in acks.values()):
                 raise wire.DecodeError("bad_field", "track acks must map peers to sequence numbers")
             belief = decode_trajectory(entry["belief"], self.tracker.model)
+            _check_observable(belief)
             out.append(RemoteTrack(entry["id"], belief, float(last), acks.get(self.me)))
         return out
 

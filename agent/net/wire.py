@@ -75,6 +75,7 @@ REASONS: frozenset[str] = frozenset(
         "grid_geometry",  # a grid whose geometry differs from the receiver's
         "bad_fire",  # malformed fire truth (agent.net.fire_truth)
         "future_epoch",  # a track stamped too far ahead of the receiver's clock (agent.beliefs.tracks)
+        "uninformative",  # a track whose newest state is not observable (agent.beliefs.tracks)
     }
 )
 

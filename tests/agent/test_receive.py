@@ -6,11 +6,15 @@ from __future__ import annotations
 
 import uuid
 
+import numpy as np
+
 from agent.agent import Agent
 from agent.config import AgentScenario
 from agent.net import wire
 from agent.net.bus import InMemoryBus
+from agent.net.gaussian_codec import encode_trajectory
 from agent.net.keys import Keys
+from fusion.trajectory import Trajectory
 
 
 def setup():
@@ -48,3 +52,20 @@ def test_a_rejected_truth_does_not_hide_the_next_one():
     agent.step(0.0)
     assert agent.rejected == {"bad_fire": 1}
     assert [t["id"] for t in agent.world.targets_at(0.0)] == ["car"]
+
+
+def test_a_track_whose_newest_state_is_not_observable_is_rejected_and_the_agent_goes_on():
+    """Bad input (reliability audit: 763 of 763 crashed the agent): a track belief with an all-zero
+    information matrix, and one scaled down to 1e-300 of a valid prior."""
+    agent, sender, keys = setup()
+    model = agent.exchanges["track"].tracker.model
+    n = model.window * model.state_dim
+    prior = Trajectory.prior(model, 0)
+    for seq, belief in enumerate([Trajectory(np.zeros(n), np.zeros((n, n)), 0, model),
+                                  Trajectory(prior.y * 1e-300, prior.Y * 1e-300, 0, model)], start=1):
+        entry = {"id": 1, "belief": encode_trajectory(belief), "last_measured": 0.0, "acks": {}}
+        send(sender, keys.belief("track", "uav1"), "track", "uav1", seq, {"tracks": [entry]})
+        agent.step(0.2 * seq)
+    assert agent.rejected == {"uninformative": 2}
+    assert agent.exchanges["track"].tracker.tracks == {}
+    assert agent.steps == 2
