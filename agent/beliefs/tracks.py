@@ -8,9 +8,10 @@ The plug-in (:class:`agent.plugins.BeliefExchange`) around :class:`agent.beliefs
 * **outgoing**: every ``[sending] period`` the confirmed tracks that gained ``info_gain`` nats, or were
   silent for ``max_silence`` (:mod:`agent.net.sending`), each charged to the link budget; each entry carries
   the per-track acknowledgement of the peer's last copy fused here;
-* **receive**: decode every track (:mod:`agent.net.wire`), reject a message stamped more than
-  :data:`FUTURE_EPOCHS` steps ahead of ours (a clock fault), fuse through the per-track channel filters
-  (exact on tree edges, intersection elsewhere; :mod:`fusion.channel_filter`);
+* **receive**: decode every track (:mod:`agent.net.wire`), reject a track that is not observable or is
+  stamped more than :data:`FUTURE_EPOCHS` steps ahead of ours or :data:`PAST_EPOCHS` behind (a clock
+  fault), fuse through the per-track channel filters (exact on tree edges, intersection elsewhere;
+  :mod:`fusion.channel_filter`);
 * **view**: the confirmed tracks' positions, for planners; **evaluate**: RMSE/ANEES against the truth.
 """
 
@@ -33,6 +34,7 @@ from fusion.gaussian import UninformativeBeliefError
 from tasking.base import TrackView
 
 FUTURE_EPOCHS = 50  # a peer's belief this many steps ahead of ours is rejected as a clock fault (chosen here)
+PAST_EPOCHS = 50  # ... and this many behind: predicting it to now would stall the loop (chosen here)
 TRACK_ENTRY_BYTES = 5000  # budget charged per track sent: an 8-state trajectory encodes to ~4.8 kB
 
 
@@ -120,6 +122,8 @@ class TrackExchange:
         remote = self._decode(payload)
         if any(r.belief.epoch > self.tracker.epoch + FUTURE_EPOCHS for r in remote):
             raise wire.DecodeError("future_epoch", f"a track more than {FUTURE_EPOCHS} steps ahead of ours")
+        if any(r.belief.epoch < self.tracker.epoch - PAST_EPOCHS for r in remote):
+            raise wire.DecodeError("past_epoch", f"a track more than {PAST_EPOCHS} steps behind ours")
         methods = [(out.method, out.cause) for out in self.tracker.fuse_remote(origin, remote, seq, tree_edge)]
         self.latencies.append(t - stamp)
         return methods

@@ -76,6 +76,7 @@ REASONS: frozenset[str] = frozenset(
         "bad_fire",  # malformed fire truth (agent.net.fire_truth)
         "future_epoch",  # a track stamped too far ahead of the receiver's clock (agent.beliefs.tracks)
         "uninformative",  # a track whose newest state is not observable (agent.beliefs.tracks)
+        "past_epoch",  # a track stamped too far behind the receiver's clock (agent.beliefs.tracks)
     }
 )
 

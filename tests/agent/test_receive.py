@@ -69,3 +69,20 @@ def test_a_track_whose_newest_state_is_not_observable_is_rejected_and_the_agent_
     assert agent.rejected == {"uninformative": 2}
     assert agent.exchanges["track"].tracker.tracks == {}
     assert agent.steps == 2
+
+
+def test_a_track_from_far_in_the_past_or_future_is_rejected_without_stalling_the_agent():
+    """Bad input (reliability audit: a track stamped far in the past stalled the agent for seconds): track
+    beliefs at epoch 0 sent to an agent at epoch 10**5, and at epoch 10**5 + 51."""
+    agent, sender, keys = setup()
+    tracker = agent.exchanges["track"].tracker
+    agent.step(0.0)
+    tracker.epoch = 10**5
+    for seq, epoch in enumerate([0, 10**5 + 51], start=1):
+        belief = Trajectory.prior(tracker.model, epoch)
+        belief = belief.update(np.hstack([np.eye(3), np.zeros((3, 3))]), np.eye(3), np.zeros(3))
+        entry = {"id": 1, "belief": encode_trajectory(belief), "last_measured": 0.0, "acks": {}}
+        send(sender, keys.belief("track", "uav1"), "track", "uav1", seq, {"tracks": [entry]})
+    agent.step(10**5 * tracker.model.step)
+    assert agent.rejected == {"past_epoch": 1, "future_epoch": 1}
+    assert tracker.tracks == {}
