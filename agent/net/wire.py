@@ -77,6 +77,7 @@ REASONS: frozenset[str] = frozenset(
         "future_epoch",  # a track stamped too far ahead of the receiver's clock (agent.beliefs.tracks)
         "uninformative",  # a track whose newest state is not observable (agent.beliefs.tracks)
         "past_epoch",  # a track stamped too far behind the receiver's clock (agent.beliefs.tracks)
+        "bad_truth",  # malformed target states or UAV positions in the world's truth (agent.sensors.truth)
     }
 )
 

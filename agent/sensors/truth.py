@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.net.fire_truth import decode_fire, decoy
-from agent.net.wire import Envelope
+from agent.net.wire import DecodeError, Envelope
 
 TRUTH_MAX_AGE = 2.0  # s of simulation time; older truth is not extrapolated (chosen here)
 
@@ -41,14 +41,16 @@ class WorldTruth:
         self.uav_positions: dict[str, np.ndarray] = {}
 
     def accept(self, env: Envelope, me: str) -> None:
-        """Take a truth message; raises :class:`agent.net.wire.DecodeError` on a malformed fire (the rest
-        is kept)."""
-        targets = env.payload.get("targets")
-        if isinstance(targets, list):
+        """Take a truth message; raises :class:`agent.net.wire.DecodeError` on malformed targets or UAV
+        positions (``bad_truth``: nothing of it is kept) or a malformed fire (``bad_fire``: the rest is kept)."""
+        targets, uavs = env.payload.get("targets"), env.payload.get("uavs")
+        if targets is not None:
+            targets = [_target(entry) for entry in _of_type(targets, list, "targets")]
+        if uavs is not None:  # the simulator's knowledge of where everyone is: the radio's range check
+            uavs = {str(k): _vector(v, f"uavs.{k}") for k, v in _of_type(uavs, dict, "uavs").items() if k != me}
+            self.uav_positions = uavs
+        if targets is not None:
             self._targets = (env.stamp, targets)
-        uavs = env.payload.get("uavs")
-        if isinstance(uavs, dict):  # the simulator's knowledge of where everyone is: the radio's range check
-            self.uav_positions = {k: np.asarray(v, float) for k, v in uavs.items() if k != me}
         fire_truth = (env.payload.get("fire"), env.payload.get("decoys", []))
         if fire_truth[0] is not None and fire_truth != self._fire_payload:
             fire = decode_fire(fire_truth[0], self.terrain)
@@ -62,13 +64,37 @@ class WorldTruth:
         stamp, targets = self._targets
         dt = t - stamp
         return [
-            {"id": tg["id"], "position": np.asarray(tg["position"], float) + dt * np.asarray(tg["velocity"], float),
-             "velocity": np.asarray(tg["velocity"], float)}
+            {"id": tg["id"], "position": tg["position"] + dt * tg["velocity"], "velocity": tg["velocity"]}
             for tg in targets
         ]
 
     def at(self, t: float) -> TruthSnapshot:
         return TruthSnapshot(self.targets_at(t), *self._fire)
+
+
+def _of_type(value, kind: type, name: str):
+    if not isinstance(value, kind):
+        raise DecodeError("bad_truth", f"{name} must be a {kind.__name__}, got {type(value).__name__}")
+    return value
+
+
+def _vector(value, name: str) -> np.ndarray:
+    """A finite NED 3-vector."""
+    ok = isinstance(value, list | tuple | np.ndarray) and len(value) == 3 and all(
+        isinstance(v, int | float | np.floating | np.integer) and not isinstance(v, bool) for v in value)
+    out = np.asarray(value, float) if ok else None
+    if out is None or out.shape != (3,) or not np.all(np.isfinite(out)):
+        raise DecodeError("bad_truth", f"{name} must be 3 finite numbers, got {value!r:.60}")
+    return out
+
+
+def _target(entry) -> dict:
+    """One target of the truth: ``{"id": str, "position": NED, "velocity": NED}``."""
+    entry = _of_type(entry, dict, "a target")
+    if not isinstance(entry.get("id"), str):
+        raise DecodeError("bad_truth", f"a target needs a string id, got {entry.get('id')!r:.60}")
+    return {"id": entry["id"], "position": _vector(entry.get("position"), "target position"),
+            "velocity": _vector(entry.get("velocity"), "target velocity")}
 
 
 def _decoys(entries) -> list[tuple[float, float, float]]:

@@ -54,3 +54,29 @@ def test_a_malformed_fire_is_rejected_and_the_rest_is_kept():
     assert err.value.reason == "bad_fire"
     assert world.targets_at(0.0) == [] and set(world.uav_positions) == {"uav1"}
     assert world.at(0.0).fires == []
+
+
+@pytest.mark.parametrize("payload, what", [
+    ({"targets": {"car": [0, 0, 0]}}, "targets as a map, not a list"),
+    ({"targets": [["car", [0, 0, 0]]]}, "a target as a list"),
+    ({"targets": [{"id": 7, "position": [0, 0, 0], "velocity": [0, 0, 0]}]}, "a numeric target id"),
+    ({"targets": [{"id": "car", "position": [0, 0], "velocity": [0, 0, 0]}]}, "a 2-D position"),
+    ({"targets": [{"id": "car", "position": [0, 0, float("nan")], "velocity": [0, 0, 0]}]}, "a NaN position"),
+    ({"targets": [{"id": "car", "position": [0, 0, 0]}]}, "a missing velocity"),
+    ({"targets": [{"id": "car", "position": ["a", 0, 0], "velocity": [0, 0, 0]}]}, "a string coordinate"),
+    ({"targets": [{"id": "car", "position": [True, 0, 0], "velocity": [0, 0, 0]}]}, "a bool coordinate"),
+    ({"uavs": [[0, 0, 0]]}, "uavs as a list"),
+    ({"uavs": {"uav1": [0, 0, float("inf")]}}, "an infinite UAV position"),
+    ({"uavs": {"uav1": "north"}}, "a UAV position as a string"),
+])
+def test_malformed_target_states_or_uav_positions_are_rejected_and_nothing_is_kept(payload, what):
+    """Bad input (reliability audit: 1,067 malformed truths crashed agents): {what}."""
+    world = WorldTruth(FlatTerrain())
+    good = {"targets": [{"id": "car", "position": [1.0, 2.0, 0.0], "velocity": [0.0, 0.0, 0.0]}],
+            "uavs": {"uav1": [5.0, 5.0, -80.0]}}
+    world.accept(truth(0.0, **good), "uav0")
+    with pytest.raises(wire.DecodeError) as err:
+        world.accept(truth(0.2, **{**good, **payload}), "uav0")
+    assert err.value.reason == "bad_truth", what
+    np.testing.assert_allclose(world.targets_at(0.0)[0]["position"], [1.0, 2.0, 0.0])
+    np.testing.assert_allclose(world.uav_positions["uav1"], [5.0, 5.0, -80.0])
