@@ -8,8 +8,8 @@ the radio of the scenario would deliver: for every message from a peer of the li
 the agent; a delayed one is held and handed over at the first drain at or after its delivery time, after
 the messages that arrived on time — the order a receiver would see.
 
-The decision needs the sender's name, sequence number and stamp, which sit in the envelope's header
-(:mod:`agent.net.wire`: keys ``o``, ``s``, ``t`` before the payload); :func:`peek` reads just those. The
+The decision needs the sender's name, sequence number and stamp, which sit in the envelope's header;
+:func:`agent.net.wire.peek_header` reads just those. The
 full, validated decoding stays with the agent: a message whose header cannot be read is passed on
 untouched, and the agent rejects it by reason. Messages from outside the plan (the world's truth, a
 ground station) and the agent's own echoes are not radio traffic and pass through.
@@ -23,45 +23,10 @@ from __future__ import annotations
 import heapq
 from collections import Counter
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
-
-import msgpack
-import numpy as np
 
 from agent.net.keys import Incoming
 from agent.net.link_emulator import LinkEmulator
-
-_HEADER_KEYS = {"k", "o", "s", "t"}  # kind, origin, seq, stamp: read before the payload ("p")
-
-
-@dataclass(frozen=True)
-class Header:
-    kind: str
-    origin: str
-    seq: int
-    stamp: float
-
-
-def peek(data: bytes) -> Header | None:
-    """The kind, origin, sequence number and stamp of an envelope, without decoding its payload; ``None``
-    if they cannot be read (the agent's decoder then rejects the message with its reason)."""
-    try:
-        unpacker = msgpack.Unpacker(max_buffer_size=len(data) or 1, raw=False, strict_map_key=False)
-        unpacker.feed(data)
-        fields: dict = {}
-        for _ in range(unpacker.read_map_header()):
-            key = unpacker.unpack()
-            if key == "p":
-                break
-            value = unpacker.unpack()
-            if key in _HEADER_KEYS:
-                fields[key] = value
-    except Exception:  # any malformed input: not ours to judge
-        return None
-    kind, origin, seq, stamp = (fields.get(k) for k in ("k", "o", "s", "t"))
-    ok = (isinstance(kind, str) and isinstance(origin, str) and isinstance(seq, int) and not isinstance(seq, bool)
-          and seq >= 0 and isinstance(stamp, int | float) and not isinstance(stamp, bool) and np.isfinite(stamp))
-    return Header(kind, origin, seq, float(stamp)) if ok else None
+from agent.net.wire import peek_header
 
 
 class RadioTransport:
@@ -96,7 +61,7 @@ class RadioTransport:
     def drain(self) -> Iterator[Incoming]:
         now = self.clock()
         for item in self.inner.drain():
-            header = peek(item.data)
+            header = peek_header(item.data)
             if header is None or header.kind == "truth" or header.origin == self.link.me \
                     or header.origin not in self.link.plan.agents:
                 yield item

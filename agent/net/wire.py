@@ -97,6 +97,7 @@ MAC_BYTES = 32
 _AGENT_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
 _FIELDS = {"v": "version", "k": "kind", "o": "origin", "s": "seq", "t": "stamp", "a": "acks", "p": "payload"}
 _SEQ_LIMIT = 1 << 64
+_HEADER = ("k", "o", "s", "t")  # kind, origin, seq, stamp: packed before the acks and the payload
 
 
 class DecodeError(ValueError):
@@ -208,6 +209,36 @@ def _decode(data, expected_origin, key, max_bytes, kinds) -> Envelope:
         acks=obj["a"],
         payload=obj["p"],
     )
+
+
+@dataclass(frozen=True)
+class Header:
+    kind: str
+    origin: str
+    seq: int
+    stamp: float
+
+
+def peek_header(data: bytes) -> Header | None:
+    """Kind, origin, seq and stamp of an envelope without decoding its payload, for the emulated radio
+    (``None`` if unreadable). Nothing is validated: :func:`decode` judges the same bytes afterwards."""
+    try:
+        unpacker = msgpack.Unpacker(max_buffer_size=len(data) or 1, raw=False, strict_map_key=False)
+        unpacker.feed(data)
+        fields: dict = {}
+        for _ in range(unpacker.read_map_header()):
+            key = unpacker.unpack()
+            if key == "p":
+                break
+            value = unpacker.unpack()
+            if key in _HEADER:
+                fields[key] = value
+    except Exception:  # any malformed input: not ours to judge
+        return None
+    kind, origin, seq, stamp = (fields.get(k) for k in _HEADER)
+    ok = isinstance(kind, str) and isinstance(origin, str) and is_int(seq) and seq >= 0 and (
+        is_int(stamp) or isinstance(stamp, float)) and math.isfinite(stamp)
+    return Header(kind, origin, seq, float(stamp)) if ok else None
 
 
 def _unpack(data: bytes, max_bytes: int):

@@ -10,7 +10,8 @@ import numpy as np
 from agent.net import wire
 from agent.net.bus import InMemoryBus
 from agent.net.link_emulator import LinkEmulator
-from agent.net.radio import Header, RadioTransport, peek
+from agent.net.radio import RadioTransport
+from agent.net.wire import Header, peek_header
 
 AGENTS = ["uav0", "uav1", "uav2"]
 
@@ -42,11 +43,11 @@ def radio(link_plan: dict, positions=dict) -> tuple[RadioTransport, object, Cloc
 
 def test_peek_reads_the_header_of_a_real_envelope_and_nothing_of_garbage():
     data = envelope("uav1", 42, 3.5, "track")
-    assert peek(data) == Header("track", "uav1", 42, 3.5)
-    assert peek(b"") is None  # empty bytes
-    assert peek(b"\xc1garbage") is None  # not msgpack
-    assert peek(data[:5]) is None  # truncated before the sequence number
-    assert peek(wire.encode(wire.Envelope(kind="track", origin="uav1", seq=1, stamp=0.0))[:-1]) is not None
+    assert peek_header(data) == Header("track", "uav1", 42, 3.5)
+    assert peek_header(b"") is None  # empty bytes
+    assert peek_header(b"\xc1garbage") is None  # not msgpack
+    assert peek_header(data[:5]) is None  # truncated before the sequence number
+    assert peek_header(wire.encode(wire.Envelope(kind="track", origin="uav1", seq=1, stamp=0.0))[:-1]) is not None
 
 
 def test_decisions_equal_the_link_emulator_called_directly():
@@ -103,7 +104,7 @@ def test_range_is_checked_with_the_positions_known_when_each_message_is_admitted
     for seq in (3, 4):
         sender.publish("k", envelope("uav1", seq, 0.0))
     drained = transport.drain()
-    assert peek(next(drained).data).seq == 3
+    assert peek_header(next(drained).data).seq == 3
     where["uav1"] = np.array([500.0, 0.0, 0.0])  # ... and leaves before the next message is admitted
     assert list(drained) == []
     assert transport.drops[("uav1", "range")] == 3
