@@ -66,7 +66,7 @@ class Agent:
         self.terrain = terrain_from_config(scenario.terrain)
         self.vehicle = vehicle_from_config(scenario.vehicle, scenario.start_position(index), 0.0)
         self.sensor = sensor_from_config(scenario.sensor, seed, self.terrain, camera)
-        self.world = WorldTruth(self.terrain)
+        self.world = WorldTruth(self.terrain, agent_id)
         self.unused: Counter = Counter()  # reason -> observations the agent could not use
         plan = scenario.radio_plan
         self.sender = SendScheduler(scenario.sending, None if plan is None else plan.sender_budget(agent_id))
@@ -158,7 +158,7 @@ class Agent:
     def _use(self, env: wire.Envelope, size: int, t: float) -> None:
         """Apply a decoded message: truth to the intake, beliefs to the exchange of their kind."""
         if env.kind == "truth":
-            return self.world.accept(env, self.id)
+            return self.world.accept(env)
         self.bytes_rx[(env.origin, env.kind)] += size
         if env.kind == "telemetry" or env.kind in EXCHANGES:
             self.topology.heard(env.origin, t)

@@ -67,10 +67,12 @@ class Sensor(Protocol):
 @dataclass
 class Outgoing:
     """A message an exchange offers. ``prepaid``: the exchange already charged the link budget (entry by
-    entry); otherwise the host admits the whole envelope against it."""
+    entry); otherwise the host admits the whole envelope against it. ``context``: the exchange's own record
+    of what it offered, handed back with the message to :meth:`BeliefExchange.sent`."""
 
     payload: dict
     prepaid: bool = False
+    context: object = None
 
 
 class Outbox(Protocol):

@@ -68,7 +68,6 @@ class GridExchange:
         self.alarms: list[Alarm] = []
         self._next_send = 0.0
         self._next_alarms = 0.0
-        self._quantized: np.ndarray | None = None  # the layers of the message on offer, as receivers rebuild them
         self.fusions: Counter = Counter()  # method -> grids fused
         self.message_bytes: list[int] = []  # payload bytes of each grid message sent
         self.keyframes = 0
@@ -129,15 +128,15 @@ class GridExchange:
         self.update_alarms(t)
         if not self._due(t):
             return None
-        codec, self._quantized = self.sender.encode(self.beliefs.to_layers(self.grid), neighbours)
+        codec, quantized = self.sender.encode(self.beliefs.to_layers(self.grid), neighbours)
         return Outgoing({"geometry": self.geometry.to_dict(), "belief": self.config.belief, "grid": codec,
-                         "acks": self.receiver.acks()})
+                         "acks": self.receiver.acks()}, context=quantized)  # the layers receivers rebuild
 
     def sent(self, seq: int, message: Outgoing) -> None:
         """Message ``seq`` left: the channel filters now assume neighbours that acknowledge it hold it."""
-        codec = message.payload["grid"]
-        self.sender.sent_as(seq, self._quantized, codec)
-        self.channels.on_send(self.beliefs.from_layers(self._quantized), seq)
+        codec, quantized = message.payload["grid"], message.context
+        self.sender.sent_as(seq, quantized, codec)
+        self.channels.on_send(self.beliefs.from_layers(quantized), seq)
         self.message_bytes.append(encoded_size(codec))
         self.keyframes += codec.get("mode") == "key"
 

@@ -66,7 +66,6 @@ class TrackExchange:
         self.evaluator = TrackEvaluator()
         self.latencies: list[float] = []  # stamp-to-fusion delays of received beliefs [s of simulation time]
         self.last_bearings: list[Bearing] = []
-        self._chosen: list = []
 
     def sensors(self) -> list:
         """Tracks bring no sensor of their own: they use the ``[sensor]`` section's bearings."""
@@ -100,18 +99,18 @@ class TrackExchange:
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
         if not self.sender.due(t):
             return None
-        self._chosen = self.sender.choose(t, self.tracker.confirmed(), TRACK_ENTRY_BYTES)
-        if not self._chosen:
+        chosen = self.sender.choose(t, self.tracker.confirmed(), TRACK_ENTRY_BYTES)
+        if not chosen:
             return None
         tracks = [
             {"id": tr.id, "belief": encode_trajectory(tr.belief), "last_measured": tr.last_measured,
              "acks": dict(tr.acks)}
-            for tr in self._chosen
+            for tr in chosen
         ]
-        return Outgoing({"tracks": tracks}, prepaid=True)
+        return Outgoing({"tracks": tracks}, prepaid=True, context=chosen)
 
     def sent(self, seq: int, message: Outgoing) -> None:
-        self.tracker.record_sent(self._chosen, seq)
+        self.tracker.record_sent(message.context, seq)
 
     def thinned(self, message: Outgoing) -> None:
         """Never called: track entries are charged to the budget one by one when chosen."""

@@ -72,7 +72,7 @@ class BearingSource:
     come from the step's simulated truth (none on a real vehicle)."""
 
     video_quality: float | None = None  # D(t) of thesis 000 §2.4 (None: no video)
-    _targets: list[dict] = []
+    _targets: list[dict] | tuple = ()  # the targets of the latest truth (none before the first)
 
     def on_truth(self, truth) -> None:
         self._targets = truth.targets or []

@@ -1,7 +1,8 @@
 """The camera sensor: render (or read) a frame, detect, and turn detections into bearings.
 
 :class:`CameraSensor` plays the role of :class:`agent.sensors.bearing.GeometricBearingSensor` — the agent calls
-``measure(t, state, truth)`` and gets :class:`~agent.sensors.bearing.Bearing` s — but goes through the image:
+``detect(t, state, truth)`` (behind the sensor seam of :class:`~agent.sensors.bearing.BearingSource`) and gets
+:class:`~agent.sensors.bearing.Bearing` s — but goes through the image:
 
 1. **capture** at ``t``: the frame the vehicle's camera sees, rendered from the *true* pose and the
    world truth (:func:`perception.render.render_frame`; targets drawn as red discs or balls, with the
@@ -99,7 +100,7 @@ class CameraStats:
 
 
 class CameraSensor(BearingSource):
-    """The camera pipeline behind the sensor interface ``measure(t, state, truth) -> [Bearing]``.
+    """The camera pipeline behind ``detect(t, state, truth) -> [Bearing]``.
 
     ``terrain`` is the world's ground (drawn under the targets); ``source`` an optional
     :class:`~agent.sensors.video_source.VideoSource` (or anything with ``read()`` and ``close()``) that

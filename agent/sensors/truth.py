@@ -31,23 +31,24 @@ class TruthSnapshot:
 
 
 class WorldTruth:
-    """The latest truth message; the fire is draped on ``terrain``."""
+    """The latest truth message as agent ``me`` sees it; the fire is draped on ``terrain``."""
 
-    def __init__(self, terrain):
+    def __init__(self, terrain, me: str):
         self.terrain = terrain
+        self.me = me
         self._targets: tuple[float, list[dict]] | None = None
         self._fire: tuple[list, list] = ([], [])  # burning cells and decoys, as scene fires
         self._fire_payload = None  # the (fire, decoys) truth self._fire was decoded from
         self.uav_positions: dict[str, np.ndarray] = {}
 
-    def accept(self, env: Envelope, me: str) -> None:
+    def accept(self, env: Envelope) -> None:
         """Take a truth message; raises :class:`agent.net.wire.DecodeError` on malformed targets or UAV
         positions (``bad_truth``: nothing of it is kept) or a malformed fire (``bad_fire``: the rest is kept)."""
         targets, uavs = env.payload.get("targets"), env.payload.get("uavs")
         if targets is not None:
             targets = [_target(entry) for entry in _of_type(targets, list, "targets")]
         if uavs is not None:  # the simulator's knowledge of where everyone is: the radio's range check
-            uavs = {str(k): _vector(v, f"uavs.{k}") for k, v in _of_type(uavs, dict, "uavs").items() if k != me}
+            uavs = {str(k): _vector(v, f"uavs.{k}") for k, v in _of_type(uavs, dict, "uavs").items() if k != self.me}
             self.uav_positions = uavs
         if targets is not None:
             self._targets = (env.stamp, targets)
