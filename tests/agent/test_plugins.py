@@ -21,7 +21,6 @@ from agent.net.zenoh_transport import ZenohTransport
 from agent.sensors.registry import SENSORS, sensor_from_config
 from agent.vehicles import VEHICLES
 from agent.vehicles.base import Vehicle
-from fusion.belief import Belief
 from perception.terrain import FlatTerrain
 from tasking.base import Planner
 from tasking.registry import PLANNERS, PlanningContext
@@ -90,18 +89,6 @@ def test_every_registered_planner_is_a_planner(name):
 def test_every_transport_is_a_transport(cls):
     for name, params in protocol_methods(plugins.Transport).items():
         assert list(inspect.signature(getattr(cls, name)).parameters)[1:] == params, (cls.__name__, name)
-
-
-def test_the_beliefs_the_channel_filter_serves_are_beliefs():
-    from fusion.gaussian import Gaussian
-    from fusion.grid import BetaGrid, LogOddsGrid
-    from fusion.trajectory import Trajectory
-
-    for cls in (Gaussian, Trajectory, LogOddsGrid, BetaGrid):
-        for name in ("fuse", "remove", "advanced_to"):
-            assert callable(getattr(cls, name)), (cls.__name__, name)
-        assert hasattr(cls, "epoch") or "epoch" in getattr(cls, "__slots__", ()), cls.__name__
-    assert {"fuse", "remove", "advanced_to", "epoch"} <= set(dir(Belief))
 
 
 def test_the_host_names_no_implementation():
