@@ -31,6 +31,7 @@ from agent.beliefs.grid_config import GridConfig
 from agent.beliefs.grid_exchange import HISTORY, GridReceiver, GridSender
 from agent.net import wire
 from agent.net.grid_codec import encoded_size
+from agent.net.sending import Every
 from agent.plugins import Observations, Outbox, Outgoing
 from agent.sensors.fire_camera import FireCamera, ThermalSensor
 from agent.sensors.truth import TruthSnapshot
@@ -66,8 +67,8 @@ class GridExchange:
         self.sensor = ThermalSensor(FireCamera(config.camera, config.detection, config.pose_noise, seed),
                                     self.geometry.centres_ned(), self.geometry.cell, terrain)
         self.alarms: list[Alarm] = []
-        self._next_send = 0.0
-        self._next_alarms = 0.0
+        self._send_timer = Every(config.period)
+        self._alarm_timer = Every(config.alarm_period)
         self.fusions: Counter = Counter()  # method -> grids fused
         self.message_bytes: list[int] = []  # payload bytes of each grid message sent
         self.keyframes = 0
@@ -110,23 +111,16 @@ class GridExchange:
         return np.maximum(p, model.predict(known, np.zeros_like(p), self.config.plan_steps)[0])
 
     def update_alarms(self, t: float) -> list[Alarm]:
-        if t + 1e-9 >= self._next_alarms:
-            self._next_alarms = t + self.config.alarm_period
+        if self._alarm_timer.due(t):
             self.alarms = extract_alarms(self.probability(), self.geometry, self.config.alarm_threshold)
         return self.alarms
 
     # -- exchange ---------------------------------------------------------------------------------
-    def _due(self, t: float) -> bool:
-        if t + 1e-9 < self._next_send:
-            return False
-        self._next_send = t + self.config.period
-        return True
-
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
         """Every ``period``: the grid as a delta against what every current neighbour acknowledged (the
         alarms are refreshed first, every ``alarm_period``)."""
         self.update_alarms(t)
-        if not self._due(t):
+        if not self._send_timer.due(t):
             return None
         codec, quantized = self.sender.encode(self.beliefs.to_layers(self.grid), neighbours)
         return Outgoing({"geometry": self.geometry.to_dict(), "belief": self.config.belief, "grid": codec,

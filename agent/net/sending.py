@@ -35,6 +35,21 @@ class SendConfig:
             raise ValueError(f"sending.info_gain must be non-negative, got {self.info_gain!r}")
 
 
+class Every:
+    """A periodic trigger on simulation time: due at the first call, then once ``period`` has passed since
+    it last fired (a step late rather than early: times within 1e-9 s count as reached)."""
+
+    def __init__(self, period: float):
+        self.period = period
+        self._next = 0.0
+
+    def due(self, t: float) -> bool:
+        if t + 1e-9 < self._next:
+            return False
+        self._next = t + self.period
+        return True
+
+
 def information(track) -> float:
     """``1/2 log det Y`` of the track's current state (its negative entropy, up to a constant)."""
     sign, logdet = np.linalg.slogdet(track.estimate().Y)
@@ -45,7 +60,7 @@ class SendScheduler:
     def __init__(self, config: SendConfig, budget: float | None, burst: float | None = None):
         self.config = config
         self.bucket = None if budget is None else TokenBucket(budget, burst or default_burst(budget))
-        self._next = 0.0
+        self.timer = Every(config.period)
         self._sent: dict[int, tuple[float, float]] = {}  # track id -> (time, information) when last sent
         self.thinned = 0  # tracks that were due but did not fit the budget
 
@@ -54,10 +69,7 @@ class SendScheduler:
         return self.bucket is None or self.bucket.admit(size, t)
 
     def due(self, t: float) -> bool:
-        if t + 1e-9 < self._next:
-            return False
-        self._next = t + self.config.period
-        return True
+        return self.timer.due(t)
 
     def choose(self, t: float, tracks: list, entry_bytes: int) -> list:
         """The tracks to send now, by priority, within the budget."""
