@@ -31,6 +31,7 @@ class Bearing:
 
 @dataclass(frozen=True)
 class BearingSensorConfig:
+    kind = "bearing"  # class attribute (not a field): the [sensor] kind, the key in agent.sensors.registry.SENSORS
     range: float = 250.0  # slant range limit [m]; chosen here for a small camera at 60-120 m altitude
     fov: float = np.deg2rad(90.0)  # full cone angle around nadir [rad]
     sigma: float = np.deg2rad(1.0)  # line-of-sight noise [rad] (Andreetto et al. use 1 degree)

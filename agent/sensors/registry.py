@@ -40,12 +40,12 @@ def sensor_from_config(config, seed: int, terrain=None, source=None):
     """The agent's sensor for its scenario's ``[sensor]`` config (an instance of a :data:`SENSORS` config
     class): the camera pipeline for a :class:`CameraSensorConfig` or an external ``source`` (a
     :class:`~agent.sensors.video_source.VideoSource`), else the geometric bearing sensor."""
-    if source is not None and not isinstance(config, CameraSensorConfig):
+    kind = getattr(config, "kind", None)
+    if kind not in SENSORS or not isinstance(config, SENSORS[kind].config_class):
+        raise TypeError(f"unknown sensor config {type(config).__name__}")
+    if source is not None and kind != "camera":
         config = CameraSensorConfig()  # an external camera with the default intrinsics and pose
-    for kind in SENSORS.values():
-        if isinstance(config, kind.config_class):
-            return kind.factory(config, seed, terrain, source)
-    raise TypeError(f"unknown sensor config {type(config).__name__}")
+    return SENSORS[config.kind].factory(config, seed, terrain, source)
 
 
 def sensor_config_from_dict(d: dict):
