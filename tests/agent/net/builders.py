@@ -55,3 +55,17 @@ leaves = (
     | st.builds(msgpack.ExtType, st.integers(0, 127), st.binary(max_size=40))
     | st.builds(msgpack.Timestamp, st.integers(-(2**40), 2**40), st.integers(0, 999_999_999))
 )
+
+
+DELETE = object()  # in changed(): remove this key
+
+
+def changed(base: dict, **changes) -> dict:
+    """``base`` with keys replaced, or removed where the value is :data:`DELETE` (a bad-input builder)."""
+    out = dict(base)
+    for key, value in changes.items():
+        if value is DELETE:
+            del out[key]
+        else:
+            out[key] = value
+    return out

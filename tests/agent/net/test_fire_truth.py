@@ -14,6 +14,7 @@ from perception.degradation import Degradation
 from perception.pinhole import PinholeView
 from perception.render import render_frame
 from perception.terrain import FlatTerrain, HillsTerrain
+from tests.agent.net.builders import DELETE, changed
 
 
 def sample_state(rows=6, cols=8) -> np.ndarray:
@@ -94,19 +95,13 @@ def test_scene_fires_render_where_the_fire_is():
 
 
 def with_(**changes) -> dict:
-    payload = good_payload()
-    for key, value in changes.items():
-        if value is KeyError:
-            del payload[key]
-        else:
-            payload[key] = value
-    return payload
+    return changed(good_payload(), **changes)
 
 
 BAD = {
     "not a map": [1, 2, 3],
-    "missing state": with_(state=KeyError),
-    "missing origin": with_(origin=KeyError),
+    "missing state": with_(state=DELETE),
+    "missing origin": with_(origin=DELETE),
     "unknown key": {**good_payload(), "seed": 3},
     "origin of 3 numbers": with_(origin=[1.0, 2.0, 3.0]),
     "origin as a string": with_(origin="0,0"),

@@ -20,8 +20,10 @@ from agent.net import wire
 from agent.net.gaussian_codec import decode_gaussian, decode_trajectory, encode_gaussian, encode_trajectory
 from agent.net.wire import KINDS, DecodeError, decode, encode, encoded_size
 from tests.agent.net.builders import (
+    DELETE,
     FUZZ,
     MODEL,
+    changed,
     envelope,
     leaves,
     only_decode_errors,
@@ -62,16 +64,7 @@ def pack(body) -> bytes:
 
 
 def body_with(**changes) -> bytes:
-    body = _valid_body()
-    for k, v in changes.items():
-        if v is _DELETE:
-            del body[k]
-        else:
-            body[k] = v
-    return pack(body)
-
-
-_DELETE = object()
+    return pack(changed(_valid_body(), **changes))
 
 
 def reason_of(data: bytes, **kwargs) -> str:
@@ -244,7 +237,7 @@ def test_a_field_with_an_out_of_range_value_is_bad_field(field, value):
 
 @pytest.mark.parametrize("field", ["v", "k", "o", "s", "t", "a", "p"])
 def test_a_missing_field_is_bad_field(field):
-    assert reason_of(body_with(**{field: _DELETE})) == "bad_field"
+    assert reason_of(body_with(**{field: DELETE})) == "bad_field"
 
 
 def test_an_unknown_field_is_bad_field():
