@@ -70,7 +70,9 @@ class Agent:
         self.unused: Counter = Counter()  # reason -> observations the agent could not use
         plan = scenario.radio_plan
         self.sender = SendScheduler(scenario.sending, None if plan is None else plan.sender_budget(agent_id))
-        context = ExchangeContext(agent_id, scenario, self.terrain, seed, self.sender, self, self.unused)
+        self.topology = Topology(agent_id)
+        context = ExchangeContext(agent_id, scenario, self.terrain, seed, self.sender, self, self.unused,
+                                  self.topology)
         built = {kind: build(context) for kind, build in EXCHANGES.items()}
         self.exchanges = {kind: exchange for kind, exchange in built.items() if exchange is not None}
         self.extra_sensors = [s for exchange in self.exchanges.values() for s in exchange.sensors()]
@@ -78,7 +80,6 @@ class Agent:
         self.planner = planner_from_config(scenario.tasking, PlanningContext(
             index, scenario.agents, scenario.area.as_tuple(), scenario.altitude, seed, frozenset(self.exchanges),
             hints))
-        self.topology = Topology(agent_id)
         self.kinds = wire.KINDS | frozenset(EXCHANGES)  # the wire's kinds and every registered belief kind
         self._now = 0.0
         self.radio = None if plan is None else RadioTransport(

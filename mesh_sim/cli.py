@@ -26,6 +26,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from agent.beliefs.tracking_config import POLICIES
 from mesh_sim.bench import BENCHMARKS
 from mesh_sim.bench.common import make_console, write_json
 
@@ -59,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
         run.add_argument("--duration", type=float, help="simulation seconds (overrides the scenario)")
         run.add_argument("--speed", type=float, default=1.0, help="simulation seconds per wall second")
         run.add_argument("--seed", type=int, help="random seed (overrides the scenario)")
-        run.add_argument("--policy", choices=["naive", "exact", "ci", "hybrid"], help="fusion policy")
+        run.add_argument("--policy", choices=POLICIES, help="fusion policy")
         run.add_argument("--topology", choices=["full", "ring", "star", "line", "tree", "random", "disk"],
                          help="radio topology (overrides the scenario's [radio])")
         run.add_argument("--loss", type=float, help="Bernoulli loss probability per message, 0..1")

@@ -11,6 +11,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from agent.beliefs.flood import FloodExchange
 from agent.beliefs.grids import GridExchange
 from agent.beliefs.tracks import TrackExchange
 from agent.net.sending import SendScheduler
@@ -28,11 +29,15 @@ class ExchangeContext:
     sender: SendScheduler  # the link budget and the track-sending trigger
     outbox: Outbox
     unused: Counter  # observations the agent could not use, by reason
+    topology: object  # agent.net.topology.Topology: who hears whom, as the agent knows it
 
 
 def _tracks(ctx: ExchangeContext) -> TrackExchange:
     sc = ctx.scenario
-    return TrackExchange(ctx.me, sc.tracking, sc.step, ctx.terrain, ctx.seed, ctx.sender, ctx.outbox, ctx.unused)
+    args = (ctx.me, sc.tracking, sc.step, ctx.terrain, ctx.seed, ctx.sender, ctx.outbox, ctx.unused)
+    if sc.tracking.policy == "flood":
+        return FloodExchange(*args, topology=ctx.topology)
+    return TrackExchange(*args)
 
 
 def _grid(ctx: ExchangeContext) -> GridExchange | None:

@@ -74,7 +74,7 @@ class RemoteTrack:
 class Track:
     id: int
     belief: Trajectory
-    channels: ChannelFilter
+    channels: ChannelFilter | None  # per-peer channel filters (None: the flood policy shares no beliefs)
     created_epoch: int
     hits: int = 1
     confirmed: bool = False
@@ -220,7 +220,9 @@ class Tracker:
         return offset
 
     def _bearing_distance(self, track: Track, bearing: Bearing) -> float:
-        est = track.estimate()
+        """Merino (3.64) against the track's state at the bearing's time (a peer's bearing may be older)."""
+        offset = self._offset(bearing)
+        est = track.estimate() if offset == 0 else track.belief.state(offset)
         model = Bearing3D(STATE_DIM, bearing.sensor, bearing.R)
         H = model.jacobian(est.mean)
         nu = model.residual(bearing.azel, model.h(est.mean))
@@ -283,7 +285,8 @@ class Tracker:
         return track
 
     def _new_track(self, belief: Trajectory) -> Track:
-        channels = ChannelFilter(Trajectory.prior(self.model, self.epoch), self.config.policy, intersect_on_newest)
+        channels = None if self.config.policy == "flood" else ChannelFilter(  # flooding shares no beliefs
+            Trajectory.prior(self.model, self.epoch), self.config.policy, intersect_on_newest)
         track = Track(self._next_id, belief, channels, created_epoch=self.epoch)
         self.tracks[track.id] = track
         self._next_id += 1

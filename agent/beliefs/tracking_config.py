@@ -9,6 +9,8 @@ import numpy as np
 
 from agent.beliefs.particle_init import ParticleInitConfig
 
+POLICIES = ("naive", "exact", "ci", "hybrid", "flood")
+
 
 @dataclass(frozen=True)
 class TrackerConfig:
@@ -28,7 +30,7 @@ class TrackerConfig:
     vertical_speed_std: float = 0.3  # ground targets hardly climb [m/s]; chosen here
     terrain_sigma: float = 2.0  # DEM error [m]; chosen here
     sensor_sigma: float = 0.5  # camera position error [m] (GPS); chosen here
-    policy: str = "hybrid"
+    policy: str = "hybrid"  # naive, exact, ci, hybrid (channel filters: agent.beliefs.tracks) or flood
     initiation: str = "ray"  # "ray" (the ray's ground point) or "particles" (agent.beliefs.particle_init, Merino §5.3)
     particle_init: ParticleInitConfig = field(default_factory=ParticleInitConfig)  # [tracking.particle_init]
 
@@ -52,5 +54,5 @@ class TrackerConfig:
             raise ValueError(f"tracking.motion must be damped or constant_velocity, got {self.motion!r}")
         if self.measurement not in ("bearing", "position"):
             raise ValueError(f"tracking.measurement must be bearing or position, got {self.measurement!r}")
-        if self.policy not in ("naive", "exact", "ci", "hybrid"):
-            raise ValueError(f"tracking.policy must be naive, exact, ci or hybrid, got {self.policy!r}")
+        if self.policy not in POLICIES:
+            raise ValueError(f"tracking.policy must be one of {', '.join(POLICIES)}, got {self.policy!r}")

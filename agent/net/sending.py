@@ -26,9 +26,10 @@ class SendConfig:
     period: float = 1.0  # s between track broadcasts; chosen here
     info_gain: float = 0.1  # nats of new information that make a track worth sending; chosen here
     max_silence: float = 3.0  # s: every confirmed track is re-sent at least this often; chosen here
+    ack_timeout: float = 0.4  # s: flood policy, re-send an increment unacknowledged after a round trip (2 steps)
 
     def __post_init__(self):
-        for name in ("period", "max_silence"):
+        for name in ("period", "max_silence", "ack_timeout"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise ValueError(f"sending.{name} must be positive, got {getattr(self, name)!r}")
         if not (np.isfinite(self.info_gain) and self.info_gain >= 0):

@@ -60,6 +60,13 @@ class Topology:
         fresh[self.me] = [t, self.neighbours(t)]
         return fresh
 
+    def neighbours_of(self, agent: str, t: float) -> frozenset[str]:
+        """``agent``'s neighbours by its fresh report (our own for ``self.me``; empty if none is known)."""
+        if agent == self.me:
+            return frozenset(self.neighbours(t))
+        when, neighbours = self._reports.get(agent, (None, frozenset()))
+        return neighbours if when is not None and t - when <= report_lifetime(self.timeout) else frozenset()
+
     def is_tree_edge(self, peer: str, t: float) -> bool:
         """True if ``(me, peer)`` is a bridge of the graph known at ``t`` and that knowledge is complete."""
         lifetime = report_lifetime(self.timeout)

@@ -17,6 +17,7 @@ from agent.config import AgentScenario
 from agent.net.bus import BusEndpoint
 from agent.net.radio import RadioTransport
 from agent.net.sending import SendScheduler
+from agent.net.topology import Topology
 from agent.net.zenoh_transport import ZenohTransport
 from agent.sensors.registry import SENSORS, sensor_from_config
 from agent.vehicles import VEHICLES
@@ -50,7 +51,8 @@ def fire_scenario() -> AgentScenario:
 
 def test_every_registered_exchange_is_a_belief_exchange():
     sc = fire_scenario()
-    ctx = ExchangeContext("uav0", sc, FlatTerrain(), 1, SendScheduler(sc.sending, None), None, Counter())
+    ctx = ExchangeContext("uav0", sc, FlatTerrain(), 1, SendScheduler(sc.sending, None), None, Counter(),
+                          Topology("uav0"))
     built = {kind: build(ctx) for kind, build in EXCHANGES.items()}
     assert set(built) == {"track", "grid"} and all(ex is not None for ex in built.values())
     for kind, exchange in built.items():
@@ -62,7 +64,8 @@ def test_every_registered_exchange_is_a_belief_exchange():
 
 def test_an_exchange_the_scenario_does_not_ask_for_is_not_built():
     sc = AgentScenario()
-    ctx = ExchangeContext("uav0", sc, FlatTerrain(), 1, SendScheduler(sc.sending, None), None, Counter())
+    ctx = ExchangeContext("uav0", sc, FlatTerrain(), 1, SendScheduler(sc.sending, None), None, Counter(),
+                          Topology("uav0"))
     assert EXCHANGES["grid"](ctx) is None
 
 

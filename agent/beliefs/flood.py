@@ -1,0 +1,107 @@
+"""The ``"track"`` exchange under ``policy = "flood"``: detections flooded, every agent a centralized tracker.
+
+Each agent floods its own detections — the independent information increments of the fleet — through
+:class:`agent.net.flood_relay.FloodRelay`: tagged ``(origin, n)``, relayed once per neighbour that lacks
+them, acknowledged and de-duplicated, so every agent applies every detection it receives exactly once, at
+the time it was taken (a trajectory window takes a late one, Merino (3.29)-(3.30)). Every agent then runs
+the same tracker on the fleet's detections — association (Merino (3.64)), initiation, extended
+information updates (3.52) — as the centralized filter does, and no belief is ever exchanged, so nothing
+can be counted twice on any graph, with loops, loss or changing links. Its cost grows with the fleet:
+every agent processes every agent's detections (about 72 bytes each on the wire, against ~4.8 kB for one
+trajectory belief).
+
+Messages: ``{"increments": [[origin, n, bearings], ...], "acks": {origin: [highest, mask]}}`` with the
+bearings as in :mod:`agent.beliefs.bearing_codec`. A message is sent when an increment is due
+(:meth:`FloodRelay.due`) or this agent received something new since its last message (its
+acknowledgements stop the neighbours' retransmissions).
+"""
+
+from __future__ import annotations
+
+from agent.beliefs.bearing_codec import decode_bearings, encode_bearings
+from agent.beliefs.tracks import FUTURE_EPOCHS, TrackExchange
+from agent.net import wire
+from agent.net.flood_relay import FloodRelay, Held
+from agent.plugins import Observations, Outgoing
+from agent.sensors.bearing import Bearing
+
+
+class FloodExchange(TrackExchange):
+    """Tracks of one agent, built from every agent's detections; see the module docstring."""
+
+    def __init__(self, *args, topology, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.topology = topology
+        model = self.tracker.model
+        self.relay = FloodRelay(self.me, self.sender.config.ack_timeout, (model.window - 1) * model.step)
+        self.too_old = 0  # received detections that no longer fit the trajectory window
+
+    def absorb(self, t: float, observations: Observations) -> None:
+        super().absorb(t, observations)
+        if self.last_bearings:
+            self.relay.originate(min(b.t for b in self.last_bearings), encode_bearings(self.last_bearings))
+
+    # -- sending ----------------------------------------------------------------------------------
+    def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
+        due = self.relay.due(t, neighbours, lambda agent: self.topology.neighbours_of(agent, t))
+        if not due and not self.relay.acks_changed():
+            return None
+        payload = {"increments": [[inc.origin, inc.n, inc.data] for inc in due], "acks": self.relay.acks()}
+        return Outgoing(payload, context=(t, due))
+
+    def sent(self, seq: int, message: Outgoing) -> None:
+        t, due = message.context
+        self.relay.sent(t, due)
+
+    def thinned(self, message: Outgoing) -> None:
+        """Nothing to undo: what did not fit stays due and goes in a later message."""
+
+    # -- receiving --------------------------------------------------------------------------------
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool,
+                t: float) -> list[tuple[str, str | None]]:
+        increments, acks = self._decode(payload)
+        self.relay.learn(origin, acks)
+        methods = []
+        for source, n, rows, bearings in increments:
+            when = min(b.t for b in bearings)
+            if self.relay.accept(origin, t, source, n, when, rows):
+                self._apply(bearings)
+                self.latencies.append(t - when)
+                methods.append(("exact", None))
+        return methods
+
+    def _apply(self, bearings: list[Bearing]) -> None:
+        """A peer's detections, applied at their own times like this agent's own."""
+        model = self.tracker.model
+        newest = max(model.epoch_of(b.t) for b in bearings)
+        if newest > self.tracker.epoch:
+            self.tracker.advance(newest)
+        oldest = self.tracker.epoch - model.window + 1
+        usable = [b for b in bearings if model.epoch_of(b.t) >= oldest]
+        self.too_old += len(bearings) - len(usable)
+        if usable:
+            self.tracker.update(usable)
+
+    def _decode(self, payload: dict) -> tuple[list, dict[str, Held]]:
+        """Everything checked before anything is applied: a bad message changes nothing."""
+        increments, acks = payload.get("increments"), payload.get("acks")
+        if not isinstance(increments, list) or not isinstance(acks, dict):
+            raise wire.DecodeError("bad_field", "a flood message needs an increments list and an acks map")
+        try:
+            held = {str(o): Held.from_wire(entry) for o, entry in acks.items()}
+        except ValueError as err:
+            raise wire.DecodeError("bad_field", f"acks: {err}") from None
+        out = []
+        newest = (self.tracker.epoch + FUTURE_EPOCHS) * self.tracker.model.step
+        for entry in increments:
+            if not (isinstance(entry, list) and len(entry) == 3 and isinstance(entry[0], str) and entry[0]
+                    and wire.is_int(entry[1]) and entry[1] >= 0):
+                raise wire.DecodeError("bad_field", "an increment is [origin, number >= 0, bearings]")
+            bearings = decode_bearings(entry[2])
+            if max(b.t for b in bearings) > newest:
+                raise wire.DecodeError("future_epoch", f"detections more than {FUTURE_EPOCHS} steps ahead of ours")
+            out.append((entry[0], int(entry[1]), entry[2], bearings))
+        return out, held
+
+    def metrics(self) -> dict:
+        return {**super().metrics(), "flood": {**self.relay.metrics(), "too_old": self.too_old}}

@@ -1,0 +1,191 @@
+"""Flooding of independent information increments: exact fusion on any connected graph.
+
+Channel filters (:mod:`fusion.channel_filter`) are exact only on a tree. On a graph with loops — or one
+whose links change — the information two neighbours share cannot be known from the link alone, and
+intersection gives away accuracy to stay consistent. Flooding avoids the question: every agent sends only
+its *own* new information, as independent increments (here: its detections), each tagged ``(origin, n)``
+with ``n`` counting the origin's increments; every agent applies each increment once, whichever way it
+arrived, and relays it to the neighbours that do not have it yet. Each measurement is then counted exactly
+once in every belief, like in the centralized filter, whatever the topology — the decentralized
+equivalent of the centralized information filter's additive measurement update (Merino (2.26)):
+``Y = Y_prior + sum_k H_k^T R_k^-1 H_k`` over every agent's measurements ``k``.
+
+**Acknowledgements.** Every message carries, per origin, which increments its sender holds: the highest
+``n`` and a bitmask of the :data:`ACK_SPAN` numbers below it (:class:`Held`). A neighbour holds an
+increment when it acknowledged it or sent it to us.
+
+**When to send** (:meth:`FloodRelay.due`). An increment is broadcast when a current neighbour does not hold
+it, and
+
+* it is new here and some such neighbour cannot have heard it where it came from (it is not a
+  neighbour of the agent we got it from, by the topology reports): sent in the same step, so information
+  ``k`` hops away arrives within about ``k`` agent steps;
+* or nobody acknowledged it within ``ack_timeout`` of its last broadcast (or of its arrival, for one a
+  neighbour should have heard directly): a retransmission, which covers loss.
+
+Increments older than ``horizon`` seconds are dropped: no belief can use them any more (they fall outside
+every trajectory window).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+ACK_SPAN = 64  # increments acknowledged below the highest one, per origin; chosen here (>> a window)
+
+
+class Held:
+    """The increments of one origin that an agent holds: the highest number and a bitmask of the
+    :data:`ACK_SPAN` numbers below it (bit ``i``: number ``high - 1 - i``); anything older counts as held."""
+
+    def __init__(self, high: int = -1, mask: int = 0):
+        self.high, self.mask = high, mask
+
+    def add(self, n: int) -> bool:
+        """Record increment ``n``; ``True`` if it was not held before."""
+        if self.has(n):
+            return False
+        if n > self.high:
+            shift = n - self.high
+            self.mask = ((self.mask << shift) | (1 << (shift - 1))) & ((1 << ACK_SPAN) - 1) if self.high >= 0 else 0
+            self.high = n
+        else:
+            self.mask |= 1 << (self.high - 1 - n)
+        return True
+
+    def has(self, n: int) -> bool:
+        if n > self.high:
+            return False
+        if n == self.high or self.high - 1 - n >= ACK_SPAN:
+            return True
+        return bool(self.mask >> (self.high - 1 - n) & 1)
+
+    def wire(self) -> list[int]:
+        return [self.high, self.mask]
+
+    @classmethod
+    def from_wire(cls, entry) -> Held:
+        """From ``[high, mask]`` as sent; ``ValueError`` if it is not two integers in range."""
+        if not isinstance(entry, list | tuple) or len(entry) != 2:
+            raise ValueError("an acknowledgement must be [highest, mask]")
+        high, mask = entry
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in (high, mask)):
+            raise ValueError("an acknowledgement holds two integers")
+        if high < -1 or not 0 <= mask < (1 << ACK_SPAN):
+            raise ValueError(f"acknowledgement out of range: highest {high}, mask {mask}")
+        return cls(high, mask)
+
+
+@dataclass
+class Increment:
+    """One origin's increment as held here: its tag, the time of its information, the opaque data, where it
+    came from (``source``: the neighbour that sent it, or the origin itself) and when it was last broadcast."""
+
+    origin: str
+    n: int
+    t: float
+    data: object
+    source: str
+    arrived: float
+    last_sent: float | None = None
+    holders: set[str] = field(default_factory=set)  # neighbours known to hold it (they sent it to us)
+
+
+class FloodRelay:
+    """The flooding state of one agent: its own increments and the ones it relays, with the neighbours'
+    acknowledgements."""
+
+    def __init__(self, me: str, ack_timeout: float, horizon: float):
+        if not ack_timeout > 0 or not horizon > 0:
+            raise ValueError(f"ack_timeout and horizon must be positive, got {ack_timeout}, {horizon}")
+        self.me, self.ack_timeout, self.horizon = me, ack_timeout, horizon
+        self._count = 0
+        self._held: dict[tuple[str, int], Increment] = {}
+        self._mine: dict[str, Held] = {}  # origin -> what this agent holds
+        self._theirs: dict[str, dict[str, Held]] = {}  # neighbour -> origin -> what it acknowledged
+        self._acks_sent: dict | None = None
+        self.relayed = 0  # increments broadcast that originated elsewhere
+        self.retransmitted = 0  # broadcasts of an increment after its first
+
+    # -- in ---------------------------------------------------------------------------------------
+    def originate(self, t: float, data) -> Increment:
+        """A new increment of this agent's own."""
+        inc = Increment(self.me, self._count, t, data, self.me, t)
+        self._count += 1
+        self._mine.setdefault(self.me, Held()).add(inc.n)
+        self._held[(inc.origin, inc.n)] = inc
+        return inc
+
+    def accept(self, sender: str, now: float, origin: str, n: int, t: float, data) -> bool:
+        """An increment received from neighbour ``sender``; ``True`` if it is new here (apply it then)."""
+        key = (origin, n)
+        if key in self._held:
+            self._held[key].holders.add(sender)
+            return False
+        if origin == self.me or not self._mine.setdefault(origin, Held()).add(n):
+            return False  # ours coming back, or one already applied and since expired
+        if now - t > self.horizon:
+            return True  # new, but too old to be worth relaying: the caller decides whether it can still use it
+        self._held[key] = Increment(origin, n, t, data, sender, now, holders={sender})
+        return True
+
+    def learn(self, sender: str, acks: dict[str, Held]) -> None:
+        """The acknowledgements in ``sender``'s latest message (they supersede its earlier ones)."""
+        self._theirs[sender] = acks
+
+    # -- out --------------------------------------------------------------------------------------
+    def _holds(self, neighbour: str, inc: Increment) -> bool:
+        if neighbour == inc.origin or neighbour in inc.holders:
+            return True
+        held = self._theirs.get(neighbour, {}).get(inc.origin)
+        return held is not None and held.has(inc.n)
+
+    def due(self, now: float, neighbours: Iterable[str],
+            neighbours_of: Callable[[str], frozenset[str]]) -> list[Increment]:
+        """The increments to broadcast now (see the module docstring), oldest first."""
+        self._expire(now)
+        neighbours = list(neighbours)
+        out = []
+        for inc in self._held.values():
+            missing = [p for p in neighbours if not self._holds(p, inc)]
+            if not missing:
+                continue
+            if inc.last_sent is not None:
+                if now - inc.last_sent >= self.ack_timeout - 1e-9:
+                    out.append(inc)
+            elif inc.source == self.me or not set(missing) <= neighbours_of(inc.source):
+                out.append(inc)
+            elif now - inc.arrived >= self.ack_timeout - 1e-9:
+                out.append(inc)
+        return sorted(out, key=lambda inc: inc.t)
+
+    def sent(self, now: float, increments: Iterable[Increment]) -> None:
+        """``increments`` left in a broadcast at ``now``."""
+        for inc in increments:
+            if inc.last_sent is not None:
+                self.retransmitted += 1
+            elif inc.origin != self.me:
+                self.relayed += 1
+            inc.last_sent = now
+        self._acks_sent = self._ack_state()
+
+    def acks(self) -> dict[str, list[int]]:
+        """What this agent holds, per origin, for its next message."""
+        return {origin: held.wire() for origin, held in self._mine.items()}
+
+    def acks_changed(self) -> bool:
+        """Has this agent received something since its last broadcast? (Then its neighbours should hear
+        its acknowledgements even if it has nothing to send.)"""
+        return self._ack_state() != self._acks_sent
+
+    def _ack_state(self) -> dict:
+        return {origin: (held.high, held.mask) for origin, held in self._mine.items() if origin != self.me}
+
+    def _expire(self, now: float) -> None:
+        for key in [k for k, inc in self._held.items() if now - inc.t > self.horizon]:
+            del self._held[key]
+
+    def metrics(self) -> dict:
+        return {"held": len(self._held), "originated": self._count, "relayed": self.relayed,
+                "retransmitted": self.retransmitted}
