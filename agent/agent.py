@@ -90,7 +90,7 @@ class Agent:
         self.sim_bytes_tx: Counter = Counter()  # kind -> bytes of simulation-only data (for the oracles)
         self.bytes_rx: Counter = Counter()  # (peer, kind) -> bytes
         self.rejected: Counter = Counter()  # reason -> messages
-        self.fusions = FusionLog()
+        self.fusions = FusionLog(silence_s=2 * scenario.sending.max_silence)
         self.telemetry_thinned = 0
         self.steps = 0
         self._seq = 0

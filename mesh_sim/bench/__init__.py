@@ -72,7 +72,8 @@ BENCHMARKS: dict[str, Benchmark] = {
         Benchmark(
             "rumor",
             "mesh_sim.bench.rumor",
-            "lockstep Monte Carlo over topology x loss x policy: RMSE ratio to the oracle, ANEES, bytes per agent",
+            "issue 11 goals, lockstep Monte Carlo of the default scenario: topology x loss x fusion method, the "
+            "make-demo and partition/merge rows: RMSE ratio to the oracle, ANEES intervals, exact share, bytes/agent",
         ),
         Benchmark(
             "stress",

@@ -28,7 +28,7 @@ and its ratio to the unlimited run's; radio bytes sent per agent per second (tra
 drops per agent per second by cause (``down``: no edge at the message's stamp — non-neighbours, churn and
 partitions; ``range``; ``loss``; ``rate``: the receive-side token bucket); tracks and telemetry messages
 thinned by the senders' budgets; fleet RMSE, its ratio to the oracle's and to the baseline's; fleet ANEES
-against the upper end of its 95 % chi-square interval (independent samples as in :mod:`mesh_sim.bench.rumor`);
+against the upper end of its 95 % chi-square interval (independent samples as in :mod:`mesh_sim.bench.rumor_stats`);
 **coverage** — per agent and target, the time the agent held a matched track over the time from
 ``ACQUIRE_S`` after the oracle first tracked the target to the end of the run (``samples x step /
 (duration - oracle's first track - ACQUIRE_S)``, at most 1) — and whether every agent still tracks every
@@ -51,7 +51,7 @@ from rich.console import Console
 
 from mesh_sim.bench import common
 from mesh_sim.bench.common import fmt
-from mesh_sim.bench.rumor import anees_interval, independent_samples
+from mesh_sim.bench.rumor_stats import anees_interval, independent_samples
 
 NAME = "stress"
 SCENARIO = "default"
