@@ -1,9 +1,11 @@
 """``python -m mesh_sim.world``: the world process of a run — truth, clock, and the centralized oracle.
 
 It publishes the targets' true states on ``sim/truth`` (agents' simulated sensors see the world only
-through it) and runs the *centralized oracle*: one tracker that receives every agent's raw bearings
-without loss (``sim/measurement/<agent>``) and associates them by their true labels. It is the
-reference that decentralized fusion is judged against: same models, same measurements, no network.
+through it) and runs the centralized references decentralized fusion is judged against
+(:mod:`mesh_sim.oracle`): the *oracle*, one tracker that receives every agent's raw bearings without loss
+(``sim/measurement/<agent>``) and associates them by their true labels — same models, same measurements,
+no network — and the *in-flight oracle*, per agent the same filter holding only what could have reached
+that agent through the radio graph by now.
 """
 
 from __future__ import annotations
@@ -17,15 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.beliefs.tracking import Tracker
-from agent.beliefs.tracks import FUTURE_EPOCHS
-from agent.evaluation import TrackEvaluator
 from agent.net import wire
 from agent.net.keys import Keys
 from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
-from agent.sensors.bearing import Bearing
 from mesh_sim.fire import FireWorld
 from mesh_sim.grid_oracle import GridOracle, grid_extent
+from mesh_sim.oracle import InFlightOracle, Oracle
 from mesh_sim.scenario import load
 from mesh_sim.target_set import truth_snapshot
 from perception.terrain import terrain_from_config
@@ -33,54 +32,6 @@ from perception.terrain import terrain_from_config
 log = logging.getLogger("skymesh.world")
 
 TRUTH_RATE_HZ = 10.0  # chosen here: agents extrapolate truth at constant velocity between snapshots
-
-
-class Oracle:
-    """Centralized tracking of every agent's bearings, associated by truth label."""
-
-    def __init__(self, scenario):
-        self.tracker = Tracker(scenario.tracking, scenario.step, terrain_from_config(scenario.terrain))
-        self.evaluator = TrackEvaluator()
-        self.late = 0
-        self.rejected = 0
-
-    def add(self, env: wire.Envelope, now: float) -> None:
-        """Apply one agent's bearings at the epoch they were taken (``now``: the world's simulation time;
-        bearings stamped far after it are a clock fault and rejected)."""
-        try:
-            bearings = [
-                Bearing(_stamp(b.get("t", env.stamp)), np.asarray(b["sensor"], float), np.asarray(b["azel"], float),
-                        np.asarray(b["R"], float), b["truth"])
-                for b in env.payload["bearings"]
-            ]
-        except (KeyError, TypeError, ValueError, AttributeError):
-            self.rejected += 1
-            return
-        epoch = self.tracker.model.epoch_of(env.stamp)
-        if epoch > self.tracker.model.epoch_of(now) + FUTURE_EPOCHS:
-            self.rejected += 1
-            return
-        if epoch > self.tracker.epoch:
-            self.tracker.advance(epoch)
-        oldest = self.tracker.epoch - self.tracker.model.window + 1
-        if any(not oldest <= self.tracker.model.epoch_of(b.t) <= self.tracker.epoch for b in bearings):
-            self.late += 1  # a camera bearing that waited for its pose longer than the window
-            bearings = [b for b in bearings if oldest <= self.tracker.model.epoch_of(b.t) <= self.tracker.epoch]
-        try:
-            self.tracker.update(bearings, by_label=True)
-        except ValueError:  # older than the trajectory window
-            self.late += 1
-
-    def evaluate(self, targets) -> None:
-        t = self.tracker.epoch * self.tracker.model.step
-        self.evaluator.record(t, truth_snapshot(targets, t), self.tracker.estimates())
-
-
-def _stamp(value) -> float:
-    """A bearing's own time (a camera's bearings may be older than the message that carries them)."""
-    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
-        raise ValueError(f"bad bearing time {value!r}")
-    return float(value)
 
 
 class World:
@@ -91,6 +42,7 @@ class World:
         self.transport = transport
         self.keys = keys
         self.oracle = Oracle(scenario.agent)
+        self.in_flight = InFlightOracle(scenario.agent)
         self.seq = 0
         self.uavs: dict[str, list] = {}  # agent -> last reported position (the radio's range check uses it)
         self.now = 0.0
@@ -128,7 +80,9 @@ class World:
                     (self.grid_oracle.add_grid if env.kind == "grid" else self.grid_oracle.add_evidence)(env)
             else:
                 self.oracle.add(env, self.now)
+                self.in_flight.add(env, self.now)
         self.oracle.evaluate(self.scenario.targets)
+        self.in_flight.evaluate(self.scenario.targets, self.now)
         if self.grid_oracle is not None:
             self.grid_oracle.evaluate(self.now)
 
@@ -151,7 +105,7 @@ class World:
 
     def summary(self) -> dict:
         out = {"targets": self.oracle.evaluator.summary(), "late_measurements": self.oracle.late,
-               "rejected": self.oracle.rejected}
+               "rejected": self.oracle.rejected, "in_flight": self.in_flight.summary()}
         if self.grid_oracle is not None:
             regions = [] if self.fire is None else self.fire.fire_regions(self.now)
             out["grid"] = {**self.grid_oracle.summary(regions, list(self.scenario.decoys)), "fire_regions": regions}
