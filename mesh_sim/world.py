@@ -3,7 +3,9 @@
 It publishes the targets' true states on ``sim/truth`` (agents' simulated sensors see the world only
 through it) and runs the *centralized oracle*: one tracker that receives every agent's raw bearings
 without loss (``sim/measurement/<agent>``) and associates them by their true labels. It is the
-reference that decentralized fusion is judged against: same models, same measurements, no network.
+reference that decentralized fusion is judged against: same measurements, no network, and a motion
+model matched to the targets — an interacting multiple model (:mod:`mesh_sim.imm_oracle`), so that its
+ANEES is consistent on static, constant-velocity and manoeuvring targets alike.
 """
 
 from __future__ import annotations
@@ -17,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.beliefs.tracking import Tracker
 from agent.beliefs.tracks import FUTURE_EPOCHS
 from agent.evaluation import TrackEvaluator
 from agent.net import wire
@@ -26,6 +27,7 @@ from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps,
 from agent.sensors.bearing import Bearing
 from mesh_sim.fire import FireWorld
 from mesh_sim.grid_oracle import GridOracle, grid_extent
+from mesh_sim.imm_oracle import ImmTracker
 from mesh_sim.scenario import load
 from mesh_sim.target_set import truth_snapshot
 from perception.terrain import terrain_from_config
@@ -39,7 +41,7 @@ class Oracle:
     """Centralized tracking of every agent's bearings, associated by truth label."""
 
     def __init__(self, scenario):
-        self.tracker = Tracker(scenario.tracking, scenario.step, terrain_from_config(scenario.terrain))
+        self.tracker = ImmTracker(scenario.tracking, scenario.step, terrain_from_config(scenario.terrain))
         self.evaluator = TrackEvaluator()
         self.late = 0
         self.rejected = 0
