@@ -3,9 +3,11 @@
 It publishes the targets' true states on ``sim/truth`` (agents' simulated sensors see the world only
 through it) and runs the *centralized oracle*: one tracker that receives every agent's raw bearings
 without loss (``sim/measurement/<agent>``) and associates them by their true labels. It is the
-reference that decentralized fusion is judged against: same measurements, no network, and a motion
-model matched to the targets — an interacting multiple model (:mod:`mesh_sim.imm_oracle`), so that its
-ANEES is consistent on static, constant-velocity and manoeuvring targets alike.
+reference that decentralized fusion is judged against, twice over: its scored tracker (``targets``) has a
+motion model matched to the targets — an interacting multiple model (:mod:`mesh_sim.imm_oracle`), so that
+its ANEES is consistent on static, constant-velocity and manoeuvring targets alike — and a second tracker
+with the agents' own models (``same_model_targets``; ``Oracle.tracker``) is the centralized filter that
+decentralized fusion equals exactly on a tree.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agent.beliefs.tracking import Tracker
 from agent.beliefs.tracks import FUTURE_EPOCHS
 from agent.evaluation import TrackEvaluator
 from agent.net import wire
@@ -38,11 +41,15 @@ TRUTH_RATE_HZ = 10.0  # chosen here: agents extrapolate truth at constant veloci
 
 
 class Oracle:
-    """Centralized tracking of every agent's bearings, associated by truth label."""
+    """Centralized tracking of every agent's bearings, associated by truth label: ``imm`` (scored in
+    ``evaluator``) and ``tracker``, the agents' models (scored in ``same_model``)."""
 
     def __init__(self, scenario):
-        self.tracker = ImmTracker(scenario.tracking, scenario.step, terrain_from_config(scenario.terrain))
+        terrain = terrain_from_config(scenario.terrain)
+        self.imm = ImmTracker(scenario.tracking, scenario.step, terrain)
+        self.tracker = Tracker(scenario.tracking, scenario.step, terrain)
         self.evaluator = TrackEvaluator()
+        self.same_model = TrackEvaluator()
         self.late = 0
         self.rejected = 0
 
@@ -64,18 +71,22 @@ class Oracle:
             return
         if epoch > self.tracker.epoch:
             self.tracker.advance(epoch)
+            self.imm.advance(epoch)
         oldest = self.tracker.epoch - self.tracker.model.window + 1
         if any(not oldest <= self.tracker.model.epoch_of(b.t) <= self.tracker.epoch for b in bearings):
             self.late += 1  # a camera bearing that waited for its pose longer than the window
             bearings = [b for b in bearings if oldest <= self.tracker.model.epoch_of(b.t) <= self.tracker.epoch]
         try:
             self.tracker.update(bearings, by_label=True)
+            self.imm.update(bearings, by_label=True)
         except ValueError:  # older than the trajectory window
             self.late += 1
 
     def evaluate(self, targets) -> None:
         t = self.tracker.epoch * self.tracker.model.step
-        self.evaluator.record(t, truth_snapshot(targets, t), self.tracker.estimates())
+        truth = truth_snapshot(targets, t)
+        self.evaluator.record(t, truth, self.imm.estimates())
+        self.same_model.record(t, truth, self.tracker.estimates())
 
 
 def _stamp(value) -> float:
@@ -152,7 +163,8 @@ class World:
             self.grid_oracle.save_maps(Path(folder) / "fire_maps.npz", self.fire.state_at(self.now), extent)
 
     def summary(self) -> dict:
-        out = {"targets": self.oracle.evaluator.summary(), "late_measurements": self.oracle.late,
+        out = {"targets": self.oracle.evaluator.summary(), "same_model_targets": self.oracle.same_model.summary(),
+               "late_measurements": self.oracle.late,
                "rejected": self.oracle.rejected}
         if self.grid_oracle is not None:
             regions = [] if self.fire is None else self.fire.fire_regions(self.now)

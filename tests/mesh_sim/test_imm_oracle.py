@@ -1,6 +1,6 @@
 """The oracle's IMM tracker (mesh_sim.imm_oracle): exact reprocessing of late bearings, deletion, bad input,
 and — slow — the oracle's consistency on the shipped camera scenario (per target, ANEES inside its 95 %
-chi-square interval, with independent samples counted as ``skymesh bench rumor`` counts them)."""
+chi-square interval, with independent samples counted as ``skymesh bench rumor`` counts them, rumor_stats)."""
 
 import tempfile
 from pathlib import Path
@@ -11,14 +11,12 @@ import pytest
 from agent.beliefs.tracking_config import TrackerConfig
 from agent.sensors.bearing import Bearing
 from fusion.measurement import los_to_azel
-from mesh_sim.bench.rumor import anees_interval, independent_samples
+from mesh_sim.bench.rumor_stats import anees_interval, independent_samples
 from mesh_sim.imm_oracle import ImmTracker, OracleConfig
 from perception.terrain import FlatTerrain
 
 STEP = 0.2
 R = np.diag([1e-4, 1e-4])
-
-
 TARGET = np.array([10.0, 5.0, 0.0])
 
 
@@ -71,7 +69,7 @@ def test_bad_input_is_rejected():
 @pytest.mark.slow
 def test_the_oracle_is_consistent_on_every_shipped_target():
     """4 agents on the camera scenario, 2 seeds x 90 s: per target, the oracle's ANEES (pooled by samples) lies
-    inside the 95 % chi-square interval of its independent samples (one per ``DECORRELATION_S`` block)."""
+    inside the 95 % chi-square interval of its independent samples (``mesh_sim.bench.rumor_stats``: one per ``DECORRELATION_S`` block)."""
     from mesh_sim.lockstep import run_lockstep
     from mesh_sim.scenario import load
 
