@@ -69,7 +69,8 @@ def test_bad_input_is_rejected():
 @pytest.mark.slow
 def test_the_oracle_is_consistent_on_every_shipped_target():
     """4 agents on the camera scenario, 2 seeds x 90 s: per target, the oracle's ANEES (pooled by samples) lies
-    inside the 95 % chi-square interval of its independent samples (``mesh_sim.bench.rumor_stats``: one per ``DECORRELATION_S`` block)."""
+    inside the 95 % chi-square interval of its independent samples (``mesh_sim.bench.rumor_stats``: one per
+    ``DECORRELATION_S`` block)."""
     from mesh_sim.lockstep import run_lockstep
     from mesh_sim.scenario import load
 
