@@ -51,12 +51,13 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
                                 for t in oracle.get("in_flight", {}).get(a["id"], [])])
     tail_rmse, tail_anees = pooled(_tails(all_targets))
     oracle_tail_rmse, oracle_tail_anees = pooled(_tails(oracle.get("targets", [])))
+    imm_rmse, imm_anees = pooled(oracle.get("imm_targets", []))
     tx = [a["bytes_tx"] for a in agents if "bytes_tx" in a]
     metrics = {
         "status": status,
         "agents": agents,
         "oracle": {**oracle, "rmse": oracle_rmse, "anees": oracle_anees, "tail_rmse": oracle_tail_rmse,
-                   "tail_anees": oracle_tail_anees},
+                   "tail_anees": oracle_tail_anees, "imm_rmse": imm_rmse, "imm_anees": imm_anees},
         "fleet": {
             "rmse": rmse,
             "anees": anees,
@@ -170,6 +171,8 @@ def summary_table(metrics: dict) -> Table:
         )
     o, f = metrics["oracle"], metrics["fleet"]
     table.add_row("oracle", _fmt(o["rmse"], ".2f"), _fmt(o["anees"], ".2f"), *[""] * 7, style="dim")
+    if o.get("imm_rmse") is not None:
+        table.add_row("oracle IMM", _fmt(o["imm_rmse"], ".2f"), _fmt(o["imm_anees"], ".2f"), *[""] * 7, style="dim")
     table.add_row("fleet", _fmt(f["rmse"], ".2f"), _fmt(f["anees"], ".2f"),
                   f"ratio {_fmt(f['rmse_ratio_to_oracle'], '.2f')}", _in_flight(f), _fmt(f.get("exact_share"), ".0%"),
                   _fmt(f["bytes_per_agent_per_s"], ",.0f"), "", "", "", style="bold")

@@ -41,7 +41,7 @@ class World:
         self.scenario = scenario
         self.transport = transport
         self.keys = keys
-        self.oracle = Oracle(scenario.agent)
+        self.oracle = Oracle(scenario.agent, imm=True)
         self.in_flight = InFlightOracle(scenario.agent)
         self.seq = 0
         self.uavs: dict[str, list] = {}  # agent -> last reported position (the radio's range check uses it)
@@ -104,7 +104,8 @@ class World:
             self.grid_oracle.save_maps(Path(folder) / "fire_maps.npz", self.fire.state_at(self.now), extent)
 
     def summary(self) -> dict:
-        out = {"targets": self.oracle.evaluator.summary(), "late_measurements": self.oracle.late,
+        out = {"targets": self.oracle.evaluator.summary(), "imm_targets": self.oracle.imm_evaluator.summary(),
+               "late_measurements": self.oracle.late,
                "rejected": self.oracle.rejected, "in_flight": self.in_flight.summary()}
         if self.grid_oracle is not None:
             regions = [] if self.fire is None else self.fire.fire_regions(self.now)
