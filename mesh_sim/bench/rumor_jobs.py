@@ -60,6 +60,8 @@ def run_job(job: dict) -> dict:
         "agents": [{"id": a["id"], "targets": a.get("targets", []), "channels": a.get("channels", {})}
                    for a in agents],
         "oracle_targets": metrics["oracle"].get("targets", []),
+        "imm_targets": metrics["oracle"].get("imm_targets", []),
+        "in_flight_targets": [t for a in agents for t in metrics["oracle"].get("in_flight", {}).get(a["id"], [])],
         "fusions": dict(fusions),
         "radio_bytes": int(sum(kinds.values())),
     }

@@ -3,8 +3,15 @@ channels' return to exact fusion after a merge, and the goals of issue 11.
 
 **Pooling.** A row pools its runs (seeds): fleet RMSE and ANEES by samples over every agent, target and seed
 (:func:`mesh_sim.results.pooled`), the oracle's likewise over its targets and seeds; the ratio fleet RMSE /
-oracle RMSE compares with the oracle of the same runs. Each agent's ANEES is pooled over its targets and the
-seeds on its own.
+oracle RMSE compares with the oracle of the same runs (same models, every bearing at once), the in-flight
+ratio with each agent's in-flight oracle (the same filter holding only what could have reached that agent,
+one step per hop: :mod:`mesh_sim.oracle`). Consistency is judged against the IMM oracle (matched to the
+targets, consistent per target). Each agent's ANEES is pooled over its targets and the seeds on its own.
+
+**Which ratio a goal uses.** Issue 11 asks that on a lossless tree every agent equal the centralized filter
+"up to the information still in flight": that goal is on the in-flight ratio (the other ratio, which adds the
+mesh's latency of one step per hop, is shown beside it). The full-mesh, ring and demo goals are on the plain
+ratio.
 
 **Independent samples for the ANEES interval.** ANEES = mean NEES / ``DIM``. An independent sample is one
 (seed, target, ``DECORRELATION_S`` block of tracked time): runs with different seeds are independent and
@@ -27,15 +34,15 @@ DIM = 6  # the tracked state: position and velocity in 3-D
 CONFIDENCE = 0.95
 DECORRELATION_S = 10.0  # one independent NEES sample per target per this many tracked seconds (motion tau)
 ANEES_FLOOR = 0.5  # issue 11: an agent's ANEES below this is wastefully conservative
-#: Fleet RMSE / oracle RMSE limits (issue 11): (topologies, losses, methods, limit).
+#: Fleet RMSE / oracle RMSE limits (issue 11): (topologies, losses, methods, limit, ratio the goal is on).
 RATIO_GOALS = (
-    (("tree",), (0.0,), ("hybrid", "exact"), 1.05),
-    (("full", "ring"), (0.0, 0.3), ("hybrid",), 1.25),
+    (("tree",), (0.0,), ("hybrid", "exact", "flood"), 1.05, "in_flight_ratio"),
+    (("full", "ring"), (0.0, 0.3), ("hybrid", "flood"), 1.25, "rmse_ratio"),
 )
 DEMO_LIMIT = 1.25  # the 4-agent `make demo` configuration (issue 11)
 RECOVERY_LIMIT_S = 10.0  # after a merge, every tree-edge channel fuses exactly again within this (issue 11)
 NAIVE = "naive"  # the method that must show the rumour problem (ANEES above the interval)
-GOAL_METHOD = "hybrid"  # the method whose every agent must be consistent
+GOAL_METHODS = ("hybrid", "flood")  # the methods whose every agent must be consistent
 
 
 def anees_interval(samples: int, dim: int = DIM, confidence: float = CONFIDENCE) -> tuple[float, float]:
@@ -71,9 +78,12 @@ def _interval(runs: list[tuple[float, list[list[dict]]]]) -> tuple[int, float, f
 def summarise(outcomes: list[dict]) -> dict:
     """The pooled figures of one row from its runs (:func:`mesh_sim.bench.rumor_jobs.run_job` outcomes)."""
     rmse, anees = pooled([t for o in outcomes for a in o["agents"] for t in a["targets"]])
-    o_rmse, o_anees = pooled([t for o in outcomes for t in o["oracle_targets"]])
+    o_rmse, same_model_anees = pooled([t for o in outcomes for t in o["oracle_targets"]])
+    f_rmse, _ = pooled([t for o in outcomes for t in o.get("in_flight_targets", [])])
+    imm = [t for o in outcomes for t in o.get("imm_targets", [])]
+    _, o_anees = pooled(imm)
     k, lo, hi = _interval([(o["step"], [a["targets"] for a in o["agents"]]) for o in outcomes])
-    ko, o_lo, o_hi = _interval([(o["step"], [o["oracle_targets"]]) for o in outcomes])
+    ko, o_lo, o_hi = _interval([(o["step"], [o.get("imm_targets", [])]) for o in outcomes])
     per_agent = {}
     for name in dict.fromkeys(a["id"] for o in outcomes for a in o["agents"]):
         runs = [(o["step"], [a["targets"] for a in o["agents"] if a["id"] == name]) for o in outcomes]
@@ -93,6 +103,8 @@ def summarise(outcomes: list[dict]) -> dict:
         "seeds": sorted(o["job"]["overrides"]["seed"] for o in outcomes),
         "rmse": rmse, "oracle_rmse": o_rmse,
         "rmse_ratio": rmse / o_rmse if rmse is not None and o_rmse else math.nan,
+        "in_flight_ratio": rmse / f_rmse if rmse is not None and f_rmse else math.nan,
+        "same_model_oracle_anees": same_model_anees,
         "anees": anees, "independent_samples": k, "anees_lo": lo, "anees_hi": hi,
         "oracle_anees": o_anees, "oracle_independent_samples": ko, "oracle_anees_lo": o_lo, "oracle_anees_hi": o_hi,
         "agents_anees": per_agent,
@@ -126,12 +138,13 @@ def recovery(outcome: dict, t_merge: float) -> list[dict]:
 # ==================================================================================================
 # goals
 # ==================================================================================================
-def _ratio_limit(row: dict) -> float | None:
+def _ratio_limit(row: dict) -> tuple[float, str] | None:
+    """The row's ratio goal: (limit, the ratio it is on)."""
     if row["kind"] == "demo":
-        return DEMO_LIMIT
+        return DEMO_LIMIT, "rmse_ratio"
     if row["kind"] != "cell":
         return None
-    return next((limit for topologies, losses, methods, limit in RATIO_GOALS
+    return next(((limit, ratio) for topologies, losses, methods, limit, ratio in RATIO_GOALS
                  if row["topology"] in topologies and row["loss"] in losses and row["method"] in methods), None)
 
 
@@ -148,13 +161,15 @@ def goals(rows: list[dict]) -> list[dict]:
         if r.get("unavailable"):
             continue
         name = r["name"]
-        limit = _ratio_limit(r)
-        if limit is not None:
-            r["ratio_limit"] = limit
-            r["ratio_pass"] = bool(math.isfinite(r["rmse_ratio"]) and r["rmse_ratio"] <= limit and _ok_run(r))
-            out.append({"goal": f"fleet RMSE / oracle <= {limit:g}", "row": name,
-                        "figure": f"{r['rmse_ratio']:.2f}", "pass": r["ratio_pass"]})
-        if r["method"] == GOAL_METHOD:
+        goal = _ratio_limit(r)
+        if goal is not None:
+            limit, ratio = goal
+            r["ratio_limit"], r["ratio_goal_on"] = limit, ratio
+            r["ratio_pass"] = bool(math.isfinite(r[ratio]) and r[ratio] <= limit and _ok_run(r))
+            what = "in-flight oracle" if ratio == "in_flight_ratio" else "oracle"
+            out.append({"goal": f"fleet RMSE / {what} <= {limit:g}", "row": name,
+                        "figure": f"{r[ratio]:.2f}", "pass": r["ratio_pass"]})
+        if r["method"] in GOAL_METHODS:
             r["agents_pass"] = r["agents_consistent"] == r["agents"] and _ok_run(r)
             out.append({"goal": f"every agent's ANEES in [{ANEES_FLOOR:g}, upper bound]", "row": name,
                         "figure": f"{r['agents_consistent']}/{r['agents']} agents "
