@@ -3,7 +3,9 @@
 Nodes sit on an undirected graph; each holds a belief and a :class:`~fusion.channel_filter.ChannelFilter`.
 A round of :meth:`FilterNetwork.exchange` is synchronous: every node broadcasts its belief with a
 fresh sequence number and, per neighbour, the last sequence number it received from that neighbour
-(the acknowledgement); every message is then lost with probability ``loss`` or fused by its receiver.
+(the acknowledgement) and its re-sync flag (:mod:`fusion.resync`); every message is then lost with
+probability ``loss`` or fused by its receiver. Node ``i`` is named ``i``; links are known exactly
+(:class:`~fusion.resync.Edge` ``TREE`` or ``LOOP``). :meth:`FilterNetwork.restart` restarts a node.
 The real runtime (agents over Zenoh, or the lockstep bus) does the same through its transport.
 """
 
@@ -15,6 +17,7 @@ from collections.abc import Callable, Iterable
 import numpy as np
 
 from fusion.channel_filter import ChannelFilter, Policy
+from fusion.resync import Edge
 
 
 def bridges(n: int, edges: Iterable[tuple[int, int]]) -> set[frozenset]:
@@ -76,11 +79,25 @@ class FilterNetwork:
         self.loss = loss
         self.rng = np.random.default_rng(seed)
         self.set_edges(edges)
+        self.prior, self.policy, self.intersect = prior, policy, intersect
         self.beliefs = [prior] * n
-        self.filters = [ChannelFilter(prior, policy, intersect) for _ in range(n)]
+        self.filters = [self._filter(i) for i in range(n)]
         self._seq = [0] * n
         self._last_received: list[dict[int, int]] = [{} for _ in range(n)]
         self.methods: Counter = Counter()
+
+    def _filter(self, i: int) -> ChannelFilter:
+        return ChannelFilter(self.prior, self.policy, self.intersect, me=i)
+
+    def restart(self, i: int) -> None:
+        """Node ``i`` restarts from the prior with fresh channel filters and sequence numbers; its
+        neighbours hear it and restart their channels with it (it holds nothing of theirs)."""
+        self.beliefs[i], self.filters[i] = self.prior, self._filter(i)
+        self._seq[i], self._last_received[i] = 0, {}
+        for k in range(self.n):
+            if k != i:
+                self.filters[k].reset(i)
+                self._last_received[k].pop(i, None)
 
     def set_edges(self, edges: Iterable[tuple[int, int]]) -> None:
         """Change the topology (links appear, disappear, loops form or break)."""
@@ -106,16 +123,17 @@ class FilterNetwork:
         outbox = []
         for i in range(self.n):
             self._seq[i] += 1
+            self.beliefs[i], flags = self.filters[i].prepare_send(self.beliefs[i])
             self.filters[i].on_send(self.beliefs[i], self._seq[i])
             for j in self.neighbours(i):
-                outbox.append((j, i, self.beliefs[i], self._seq[i], self._last_received[i].get(j)))
-        for receiver, sender, belief, seq, ack in sorted(outbox, key=lambda m: (m[0], m[1])):
+                outbox.append((j, i, self.beliefs[i], self._seq[i], self._last_received[i].get(j), flags.get(j)))
+        for receiver, sender, belief, seq, ack, flag in sorted(outbox, key=lambda m: (m[0], m[1])):
             if self.loss and self.rng.random() < self.loss:
                 self.methods["lost"] += 1
                 continue
+            edge = Edge.TREE if frozenset((receiver, sender)) in self.tree_edges else Edge.LOOP
             out = self.filters[receiver].on_receive(
-                sender, self.beliefs[receiver], belief, ack, seq=seq,
-                tree_edge=frozenset((receiver, sender)) in self.tree_edges,
+                sender, self.beliefs[receiver], belief, ack, seq=seq, tree_edge=edge, resync=flag,
             )
             self.beliefs[receiver] = out.fused
             self._last_received[receiver][sender] = seq
