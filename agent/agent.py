@@ -167,9 +167,9 @@ class Agent:
             self.topology.learn(env.payload.get("topology"))
         exchange = self.exchanges.get(env.kind)
         if exchange is not None:
-            tree_edge = self.topology.is_tree_edge(env.origin, t)
+            edge = self.topology.edge(env.origin, t)
             self.fusions.record(env.origin, t, exchange.receive(env.origin, env.seq, env.stamp, env.payload,
-                                                                tree_edge, t))
+                                                                edge, t))
 
     def _reject(self, peer: str, reason: str, log_it: bool = True) -> None:
         self.rejected[reason] += 1

@@ -28,6 +28,7 @@ from typing import Protocol
 
 from agent.net.keys import Incoming
 from agent.sensors.truth import TruthSnapshot
+from fusion.resync import Edge
 
 #: Observations of one step, by name: ``"bearings"`` (a list of :class:`agent.sensors.bearing.Bearing`),
 #: ``"fire_evidence"`` (a thermal frame's cell evidence), ...
@@ -112,9 +113,10 @@ class BeliefExchange(Protocol):
         """``message`` did not fit the link budget and was not sent."""
         ...
 
-    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool,
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
                 t: float) -> list[tuple[str, str | None]]:
-        """Decode and fuse a peer's message; returns ``(method, cause)`` per belief fused, the cause of a
+        """Decode and fuse a peer's message (``edge``: what the link to ``origin`` is in the known graph,
+        :meth:`agent.net.topology.Topology.edge`); returns ``(method, cause)`` per belief fused, the cause of a
         fusion that was not exact (:data:`fusion.channel_filter.CAUSES`) or ``None``. Raises
         :class:`agent.net.wire.DecodeError` on a bad message, and then changes nothing."""
         ...

@@ -3,7 +3,11 @@
 Nodes sit on an undirected graph; each holds a belief and a :class:`~fusion.channel_filter.ChannelFilter`.
 A round of :meth:`FilterNetwork.exchange` is synchronous: every node broadcasts its belief with a
 fresh sequence number and, per neighbour, the last sequence number it received from that neighbour
-(the acknowledgement); every message is then lost with probability ``loss`` or fused by its receiver.
+(the acknowledgement), its re-sync flag (:mod:`fusion.resync`) and its freshness; every message is then
+lost with probability ``loss`` or fused by its receiver. Node ``i`` is named ``i``; links are known exactly
+(:class:`~fusion.resync.Edge` ``TREE`` or ``LOOP``). :meth:`FilterNetwork.restart` restarts a node. A link
+that returns after an outage during which its ends were joined by other links (at once or in turn) is
+a new link to both ends' filters (:meth:`~fusion.channel_filter.ChannelFilter.forget`).
 The real runtime (agents over Zenoh, or the lockstep bus) does the same through its transport.
 """
 
@@ -15,6 +19,7 @@ from collections.abc import Callable, Iterable
 import numpy as np
 
 from fusion.channel_filter import ChannelFilter, Policy
+from fusion.resync import Edge
 
 
 def bridges(n: int, edges: Iterable[tuple[int, int]]) -> set[frozenset]:
@@ -57,6 +62,21 @@ def bridges(n: int, edges: Iterable[tuple[int, int]]) -> set[frozenset]:
     return result
 
 
+def _connected(edges: Iterable[tuple[int, int]], a: int, b: int) -> bool:
+    """Is ``b`` reachable from ``a`` over ``edges``? Over the union of the graphs seen during an outage this
+    says whether information may have passed between the two ends by other paths, even paths that never
+    existed all at once (a relay that met one end, then the other)."""
+    reached, frontier = {a}, [a]
+    while frontier:
+        u = frontier.pop()
+        for x, y in edges:
+            for p, q in ((x, y), (y, x)):
+                if p == u and q not in reached:
+                    reached.add(q)
+                    frontier.append(q)
+    return b in reached
+
+
 class FilterNetwork:
     """``n`` nodes with beliefs starting at ``prior``, linked by ``edges``, fusing with ``policy``."""
 
@@ -75,18 +95,46 @@ class FilterNetwork:
         self.n = n
         self.loss = loss
         self.rng = np.random.default_rng(seed)
-        self.set_edges(edges)
+        self.prior, self.policy, self.intersect = prior, policy, intersect
         self.beliefs = [prior] * n
-        self.filters = [ChannelFilter(prior, policy, intersect) for _ in range(n)]
+        self.filters = [self._filter(i) for i in range(n)]
+        self.edges: list[tuple[int, int]] = []
+        self._outages: dict[tuple[int, int], set] = {}  # a link that is down -> every link up since it went down
+        self.set_edges(edges)
+        for u, v in self.edges:  # links there from the start, when every node held only the prior
+            self.filters[u].reset(v)
+            self.filters[v].reset(u)
         self._seq = [0] * n
         self._last_received: list[dict[int, int]] = [{} for _ in range(n)]
         self.methods: Counter = Counter()
+
+    def _filter(self, i: int) -> ChannelFilter:
+        return ChannelFilter(self.prior, self.policy, self.intersect, me=i)
+
+    def restart(self, i: int) -> None:
+        """Node ``i`` restarts from the prior with fresh channel filters and sequence numbers; its
+        neighbours hear it and restart their channels with it (it holds nothing of theirs)."""
+        self.beliefs[i], self.filters[i] = self.prior, self._filter(i)
+        self._seq[i], self._last_received[i] = 0, {}
+        for k in range(self.n):
+            if k != i:
+                self.filters[k].reset(i)
+                self._last_received[k].pop(i, None)
 
     def set_edges(self, edges: Iterable[tuple[int, int]]) -> None:
         """Change the topology (links appear, disappear, loops form or break)."""
         edges = sorted({tuple(sorted(e)) for e in edges})
         if any(u == v or not (0 <= u < self.n and 0 <= v < self.n) for u, v in edges):
             raise ValueError(f"edges must join two distinct nodes among 0..{self.n - 1}")
+        old, new = set(self.edges), set(edges)
+        for e in old - new:
+            self._outages[e] = set()
+        for e, seen in self._outages.items():
+            seen |= new - {e}
+        for u, v in new - old:  # a returning link whose ends may have exchanged information meanwhile is new
+            if (u, v) in self._outages and _connected(self._outages.pop((u, v)), u, v):
+                self.filters[u].forget(v)
+                self.filters[v].forget(u)
         self.edges = edges
         self.tree_edges = bridges(self.n, edges)
 
@@ -106,16 +154,20 @@ class FilterNetwork:
         outbox = []
         for i in range(self.n):
             self._seq[i] += 1
+            self.beliefs[i], flags = self.filters[i].prepare_send(self.beliefs[i])
+            fresh = self.filters[i].freshness
             self.filters[i].on_send(self.beliefs[i], self._seq[i])
             for j in self.neighbours(i):
-                outbox.append((j, i, self.beliefs[i], self._seq[i], self._last_received[i].get(j)))
-        for receiver, sender, belief, seq, ack in sorted(outbox, key=lambda m: (m[0], m[1])):
+                outbox.append((j, i, self.beliefs[i], self._seq[i], self._last_received[i].get(j), flags.get(j),
+                               fresh))
+        for receiver, sender, belief, seq, ack, flag, fresh in sorted(outbox, key=lambda m: (m[0], m[1])):
             if self.loss and self.rng.random() < self.loss:
                 self.methods["lost"] += 1
                 continue
+            edge = Edge.TREE if frozenset((receiver, sender)) in self.tree_edges else Edge.LOOP
             out = self.filters[receiver].on_receive(
-                sender, self.beliefs[receiver], belief, ack, seq=seq,
-                tree_edge=frozenset((receiver, sender)) in self.tree_edges,
+                sender, self.beliefs[receiver], belief, ack, seq=seq, tree_edge=edge, resync=flag,
+                fresh=fresh,
             )
             self.beliefs[receiver] = out.fused
             self._last_received[receiver][sender] = seq

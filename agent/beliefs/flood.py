@@ -24,6 +24,7 @@ from agent.net import wire
 from agent.net.flood_relay import FloodRelay, Held
 from agent.plugins import Observations, Outgoing
 from agent.sensors.bearing import Bearing
+from fusion.resync import Edge
 
 
 class FloodExchange(TrackExchange):
@@ -57,7 +58,7 @@ class FloodExchange(TrackExchange):
         """Nothing to undo: what did not fit stays due and goes in a later message."""
 
     # -- receiving --------------------------------------------------------------------------------
-    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool,
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
                 t: float) -> list[tuple[str, str | None]]:
         increments, acks = self._decode(payload)
         self.relay.learn(origin, acks)

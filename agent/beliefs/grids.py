@@ -41,6 +41,7 @@ from fusion.grid_alarms import Alarm, extract_alarms
 from fusion.grid_geometry import GridGeometry
 from fusion.grid_intersect import chernoff_intersect, half_intersect, max_intersect
 from fusion.grid_layers import GridLayers
+from fusion.resync import Edge
 from tasking.base import MapView
 
 INTERSECT_RULES = {"chernoff": chernoff_intersect, "max": max_intersect, "half": half_intersect}
@@ -137,7 +138,7 @@ class GridExchange:
     def thinned(self, message: Outgoing) -> None:
         self.grids_thinned += 1
 
-    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool,
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
                 t: float) -> list[tuple[str, str | None]]:
         """Decode and fuse a neighbour's grid message. Raises :class:`agent.net.wire.DecodeError` on a bad
         message (nothing is changed then)."""
@@ -158,7 +159,7 @@ class GridExchange:
         ours = acks.get(self.me)
         if ours is not None:
             self.sender.acknowledge(origin, ours)
-        out = self.channels.on_receive(origin, self.grid, received, ours, seq, tree_edge)
+        out = self.channels.on_receive(origin, self.grid, received, ours, seq, edge)
         self.grid = out.fused
         self.fusions[out.method] += 1
         return [(f"grid_{out.method}", out.cause)]

@@ -51,6 +51,7 @@ from fusion.channel_filter import ChannelFilter, Received
 from fusion.gaussian import Gaussian, UninformativeBeliefError
 from fusion.measurement import Bearing3D, PositionMeasurement
 from fusion.motion import ConstantVelocity, DampedVelocity
+from fusion.resync import Edge
 from fusion.trajectory import Trajectory, TrajectoryModel, intersect_on_newest
 from perception.geolocation import geolocate
 
@@ -68,6 +69,8 @@ class RemoteTrack:
     belief: Trajectory
     last_measured: float
     ack: int | None
+    resync: int | None = None  # the peer's re-sync flag for us (fusion.resync), None if it sent none
+    fresh: int = 0  # the peer's fusion.channel_filter.Freshness of this track when it sent it
 
 
 @dataclass
@@ -94,8 +97,9 @@ class Track:
 class Tracker:
     """All tracks of one agent (or of the centralized oracle, with ``by_label=True`` updates)."""
 
-    def __init__(self, config: TrackerConfig, step: float, terrain, seed: int = 0):
+    def __init__(self, config: TrackerConfig, step: float, terrain, seed: int = 0, me: str | None = None):
         self.config = config
+        self.me = me  # the agent's name: turns on channel re-synchronisation (fusion.resync)
         self.initiator = ParticleInitiator(config.particle_init, seed) if config.initiation == "particles" else None
         self.terrain = terrain
         if config.motion == "damped":
@@ -286,7 +290,7 @@ class Tracker:
 
     def _new_track(self, belief: Trajectory) -> Track:
         channels = None if self.config.policy == "flood" else ChannelFilter(  # flooding shares no beliefs
-            Trajectory.prior(self.model, self.epoch), self.config.policy, intersect_on_newest)
+            Trajectory.prior(self.model, self.epoch), self.config.policy, intersect_on_newest, me=self.me)
         track = Track(self._next_id, belief, channels, created_epoch=self.epoch)
         self.tracks[track.id] = track
         self._next_id += 1
@@ -301,7 +305,12 @@ class Tracker:
         for track in tracks:
             track.channels.on_send(track.belief, seq)
 
-    def fuse_remote(self, peer: str, remote: list[RemoteTrack], seq: int, tree_edge: bool = True) -> list[Received]:
+    def prepare_send(self, track: Track) -> dict:
+        """Adopt any agreed re-sync baseline into ``track`` before it is sent; its re-sync flags per peer."""
+        track.belief, flags = track.channels.prepare_send(track.belief)
+        return flags
+
+    def fuse_remote(self, peer: str, remote: list[RemoteTrack], seq: int, edge: Edge = Edge.TREE) -> list[Received]:
         """Fuse a peer's tracks from its message ``seq``."""
         results = []
         claimed = {self.labels[(peer, r.id)] for r in remote if (peer, r.id) in self.labels}
@@ -309,7 +318,8 @@ class Tracker:
             belief = r.belief if r.belief.epoch >= self.epoch else r.belief.advanced_to(self.epoch)
             self.epoch = max(self.epoch, belief.epoch)
             track = self._match_remote(peer, r.id, belief, claimed)
-            out = track.channels.on_receive(peer, track.belief, belief, r.ack, seq=seq, tree_edge=tree_edge)
+            out = track.channels.on_receive(peer, track.belief, belief, r.ack, seq=seq, tree_edge=edge,
+                                            resync=r.resync, fresh=r.fresh)
             track.belief = out.fused
             track.confirmed = True
             track.acks[peer] = seq
@@ -336,8 +346,7 @@ class Tracker:
                 epoch = max(keep.belief.epoch, drop.belief.epoch)
                 keep.belief = intersect_on_newest(keep.belief.advanced_to(epoch), drop.belief.advanced_to(epoch))
                 keep.last_measured = max(keep.last_measured, drop.last_measured)
-                for peer in set(keep.channels.neighbours()) | set(drop.channels.neighbours()):
-                    keep.channels.desynchronize(peer)
+                keep.channels.desynchronize_all()
                 self.labels = {k: (keep_id if v == drop_id else v) for k, v in self.labels.items()}
                 keep.acks = {}  # after an intersection, no peer holds "our copy" of this track any more
                 del self.tracks[drop_id]

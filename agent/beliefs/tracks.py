@@ -30,7 +30,9 @@ from agent.net.sending import SendScheduler
 from agent.plugins import Observations, Outbox, Outgoing
 from agent.sensors.bearing import Bearing
 from agent.sensors.truth import TruthSnapshot
+from fusion.channel_filter import Freshness
 from fusion.gaussian import UninformativeBeliefError
+from fusion.resync import Edge
 from tasking.base import TrackView
 
 FUTURE_EPOCHS = 50  # a peer's belief this many steps ahead of ours is rejected as a clock fault (chosen here)
@@ -51,6 +53,12 @@ def _check_observable(belief) -> None:
         raise wire.DecodeError("uninformative", "a track whose newest state has a non-finite mean or covariance")
 
 
+def _seq_map(value) -> bool:
+    """Is ``value`` a map from peer names to sequence numbers (non-negative integers, not booleans)?"""
+    return isinstance(value, dict) and all(
+        isinstance(k, str) and isinstance(v, int) and not isinstance(v, bool) and v >= 0 for k, v in value.items())
+
+
 class TrackExchange:
     """Tracks of one agent, exchanged with its peers. ``unused`` counts observations it could not use."""
 
@@ -59,7 +67,7 @@ class TrackExchange:
     def __init__(self, me: str, config: TrackerConfig, step: float, terrain, seed: int, sender: SendScheduler,
                  outbox: Outbox, unused: Counter):
         self.me = me
-        self.tracker = Tracker(config, step, terrain, seed=seed + 104729)
+        self.tracker = Tracker(config, step, terrain, seed=seed + 104729, me=me)
         self.sender = sender
         self.outbox = outbox
         self.unused = unused
@@ -102,12 +110,20 @@ class TrackExchange:
         chosen = self.sender.choose(t, self.tracker.confirmed(), TRACK_ENTRY_BYTES)
         if not chosen:
             return None
-        tracks = [
-            {"id": tr.id, "belief": encode_trajectory(tr.belief), "last_measured": tr.last_measured,
-             "acks": dict(tr.acks)}
-            for tr in chosen
-        ]
+        tracks = [self._entry(tr) for tr in chosen]
         return Outgoing({"tracks": tracks}, prepaid=True, context=chosen)
+
+    def _entry(self, tr) -> dict:
+        """One track on the wire: its belief (after adopting an agreed re-sync baseline), acknowledgements,
+        re-sync flags per peer and freshness (:mod:`fusion.resync`, :class:`fusion.channel_filter.Freshness`)."""
+        resync = self.tracker.prepare_send(tr)
+        entry = {"id": tr.id, "belief": encode_trajectory(tr.belief), "last_measured": tr.last_measured,
+                 "acks": dict(tr.acks)}
+        if resync:
+            entry["resync"] = resync
+        if tr.channels.freshness:
+            entry["fresh"] = int(tr.channels.freshness)
+        return entry
 
     def sent(self, seq: int, message: Outgoing) -> None:
         self.tracker.record_sent(message.context, seq)
@@ -116,14 +132,14 @@ class TrackExchange:
         """Never called: track entries are charged to the budget one by one when chosen."""
 
     # -- receiving --------------------------------------------------------------------------------
-    def receive(self, origin: str, seq: int, stamp: float, payload: dict, tree_edge: bool,
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
                 t: float) -> list[tuple[str, str | None]]:
         remote = self._decode(payload)
         if any(r.belief.epoch > self.tracker.epoch + FUTURE_EPOCHS for r in remote):
             raise wire.DecodeError("future_epoch", f"a track more than {FUTURE_EPOCHS} steps ahead of ours")
         if any(r.belief.epoch < self.tracker.epoch - PAST_EPOCHS for r in remote):
             raise wire.DecodeError("past_epoch", f"a track more than {PAST_EPOCHS} steps behind ours")
-        methods = [(out.method, out.cause) for out in self.tracker.fuse_remote(origin, remote, seq, tree_edge)]
+        methods = [(out.method, out.cause) for out in self.tracker.fuse_remote(origin, remote, seq, edge)]
         self.latencies.append(t - stamp)
         return methods
 
@@ -138,11 +154,17 @@ class TrackExchange:
             last, acks = entry.get("last_measured"), entry.get("acks", {})
             if isinstance(last, bool) or not isinstance(last, int | float) or not np.isfinite(last):
                 raise wire.DecodeError("bad_field", "each track needs a finite last_measured time")
-            if not isinstance(acks, dict) or not all(isinstance(v, int) and v >= 0 for v in acks.values()):
+            if not _seq_map(acks):
                 raise wire.DecodeError("bad_field", "track acks must map peers to sequence numbers")
+            resync, fresh = entry.get("resync", {}), entry.get("fresh", 0)
+            if not _seq_map(resync):
+                raise wire.DecodeError("bad_field", "track resync must map peers to sequence numbers")
+            if isinstance(fresh, bool) or fresh not in tuple(Freshness):
+                raise wire.DecodeError("bad_field", f"track fresh must be one of {[int(f) for f in Freshness]}")
             belief = decode_trajectory(entry["belief"], self.tracker.model)
             _check_observable(belief)
-            out.append(RemoteTrack(entry["id"], belief, float(last), acks.get(self.me)))
+            out.append(RemoteTrack(entry["id"], belief, float(last), acks.get(self.me), resync.get(self.me),
+                                   Freshness(fresh)))
         return out
 
     # -- views and results ------------------------------------------------------------------------

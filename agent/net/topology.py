@@ -15,6 +15,7 @@ partitioned component can still recognise its own tree edges.
 from __future__ import annotations
 
 from fusion.network import bridges
+from fusion.resync import Edge
 
 NEIGHBOUR_TIMEOUT = 3.0  # s without hearing a peer before it stops being a neighbour; chosen here
 
@@ -67,18 +68,19 @@ class Topology:
         when, neighbours = self._reports.get(agent, (None, frozenset()))
         return neighbours if when is not None and t - when <= report_lifetime(self.timeout) else frozenset()
 
-    def is_tree_edge(self, peer: str, t: float) -> bool:
-        """True if ``(me, peer)`` is a bridge of the graph known at ``t`` and that knowledge is complete."""
+    def edge(self, peer: str, t: float) -> Edge:
+        """What ``(me, peer)`` is in the graph known at ``t``: ``TREE`` (a bridge) or ``LOOP`` when that knowledge
+        is complete, ``UNKNOWN`` when it is not."""
         lifetime = report_lifetime(self.timeout)
         reports = {a: n for a, (w, n) in self._reports.items() if t - w <= lifetime}
         reports[self.me] = frozenset(self.neighbours(t))
         seen = set(reports) | {n for ns in reports.values() for n in ns}
         if not seen <= set(reports):
-            return False
+            return Edge.UNKNOWN
         graph = frozenset(frozenset((a, n)) for a, ns in reports.items() for n in ns if n != a)
         if self._cache is None or self._cache[0] != graph:
             names = sorted(seen)
             index = {name: i for i, name in enumerate(names)}
             found = bridges(len(names), [tuple(index[x] for x in e) for e in graph])
             self._cache = (graph, frozenset(frozenset(names[i] for i in e) for e in found))
-        return frozenset((self.me, peer)) in self._cache[1]
+        return Edge.TREE if frozenset((self.me, peer)) in self._cache[1] else Edge.LOOP

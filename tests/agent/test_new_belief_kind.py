@@ -41,7 +41,7 @@ class CountExchange:
     def thinned(self, message):
         pass
 
-    def receive(self, origin, seq, stamp, payload, tree_edge, t):
+    def receive(self, origin, seq, stamp, payload, edge, t):
         if not isinstance(payload.get("count"), int):
             raise wire.DecodeError("bad_field", "count must be an integer")
         self.largest[origin] = max(payload["count"], self.largest.get(origin, 0))

@@ -86,3 +86,26 @@ def test_a_track_from_far_in_the_past_or_future_is_rejected_without_stalling_the
     agent.step(10**5 * tracker.model.step)
     assert agent.rejected == {"past_epoch": 1, "future_epoch": 1}
     assert tracker.tracks == {}
+
+
+def test_bad_resync_or_fresh_fields_are_rejected_and_change_nothing():
+    """The re-sync flags ({peer: seq}) and freshness of a track entry (fusion.resync) are checked before any
+    track is touched; the same entry with valid ones is fused."""
+    agent, sender, keys = setup()
+    model = agent.exchanges["track"].tracker.model
+    n = model.window * model.state_dim
+    prior = Trajectory.prior(model, 0)
+    belief = encode_trajectory(Trajectory(prior.y, prior.Y + np.eye(n), 0, model))
+    bad = [{"resync": {"uav0": -1}}, {"resync": {"uav0": "3"}}, {"resync": {"uav0": True}}, {"resync": [3]},
+           {"fresh": 3}, {"fresh": True}, {"fresh": "2"}]
+    for seq, extra in enumerate(bad, start=1):
+        send(sender, keys.belief("track", "uav1"), "track", "uav1", seq,
+             {"tracks": [{"id": 1, "belief": belief, "last_measured": 0.0, "acks": {}, **extra}]})
+        agent.step(0.2 * seq)
+        assert agent.rejected == {"bad_field": seq}, extra
+        assert agent.exchanges["track"].tracker.tracks == {}, extra
+    seq = len(bad) + 1
+    send(sender, keys.belief("track", "uav1"), "track", "uav1", seq, {"tracks": [
+        {"id": 1, "belief": belief, "last_measured": 0.0, "acks": {}, "resync": {"uav0": 0}, "fresh": 2}]})
+    agent.step(0.2 * seq)
+    assert len(agent.exchanges["track"].tracker.tracks) == 1

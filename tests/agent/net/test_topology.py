@@ -1,7 +1,8 @@
 """What an agent knows of the communication graph (agent/net/topology.py).
 
-``is_tree_edge`` is checked against a brute-force oracle: an edge is a bridge iff removing it leaves its two
-ends disconnected (breadth-first search), on random graphs that reach the agent as gossip reports. The
+``Topology.edge`` (TREE / LOOP / UNKNOWN) is checked against a brute-force oracle: an edge is a bridge iff
+removing it leaves its two ends disconnected (breadth-first search),
+on random graphs that reach the agent as gossip reports. The
 completeness rule, the report lifetime, the neighbour timeout and the handling of malformed gossip are
 checked on small hand-built cases.
 """
@@ -13,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.net.topology import NEIGHBOUR_TIMEOUT, Topology, report_lifetime
+from fusion.resync import Edge
 
 ME = "a0"
 
@@ -50,7 +52,7 @@ def gossiped_graphs(draw):
     """A random graph over a0..a{n-1}, each edge reported by one end or both, and some agents silent (no report).
 
     Returns (agents, reports, heard, expected): what the other agents report, whom ME heard, and the
-    expected :meth:`Topology.is_tree_edge` per peer, from the stated rules (an edge counts if either end
+    expected :meth:`Topology.edge` per peer, from the stated rules (an edge counts if either end
     reports it; knowledge is complete iff everyone mentioned has a report) and the brute-force bridge test.
     """
     n = draw(st.integers(2, 8))
@@ -71,44 +73,45 @@ def gossiped_graphs(draw):
     graph = {frozenset((a, b)) for a, ns in known.items() for b in ns}
     mentioned = set(known) | {b for ns in known.values() for b in ns}
     complete = mentioned <= set(known)
-    expected = {p: complete and brute_force_bridge(graph, ME, p) for p in agents[1:]}
+    expected = {p: (Edge.TREE if brute_force_bridge(graph, ME, p) else Edge.LOOP) if complete else Edge.UNKNOWN
+                for p in agents[1:]}
     return agents, reports, heard, expected
 
 
 @settings(max_examples=300, deadline=None)
 @given(gossiped_graphs(), gossiped_graphs())
-def test_is_tree_edge_matches_brute_force_bridges(first, second):
+def test_edge_matches_brute_force_bridges(first, second):
     _, reports, heard, expected = first
     topo = topology_from(reports, heard, 10.0)
-    assert {p: topo.is_tree_edge(p, 10.0) for p in expected} == expected
+    assert {p: topo.edge(p, 10.0) for p in expected} == expected
     # later, another graph: at t = 20 the first one's reports (lifetime 7 s) and neighbours (timeout 3 s)
     # have all expired, so only the second graph is known; the cached bridges must not be reused
     _, reports, heard, expected = second
     for peer in heard:
         topo.heard(peer, 20.0)
     topo.learn({a: [20.0, ns] for a, ns in reports.items()})
-    assert {p: topo.is_tree_edge(p, 20.0) for p in expected} == expected
+    assert {p: topo.edge(p, 20.0) for p in expected} == expected
 
 
 def test_line_tree_edges_and_a_loop_removes_them():
     # a0 - a1 - a2: every edge is a bridge
     topo = topology_from({"a1": [ME, "a2"], "a2": ["a1"]}, ["a1"], 0.0)
-    assert topo.is_tree_edge("a1", 0.0)
-    assert not topo.is_tree_edge("a2", 0.0)  # not a neighbour of a0
+    assert topo.edge("a1", 0.0) is Edge.TREE
+    assert topo.edge("a2", 0.0) is Edge.LOOP  # not a neighbour of a0: not a bridge of the known graph
     # close the loop a0 - a1 - a2 - a0 (only a2 reports the new edge): no edge of a0 is a bridge
     topo.learn({"a2": [1.0, ["a1", ME]]})
-    assert not topo.is_tree_edge("a1", 1.0)
+    assert topo.edge("a1", 1.0) is Edge.LOOP
 
 
 def test_an_agent_mentioned_without_a_report_makes_knowledge_incomplete():
     # a1 reports a neighbour a2 that never reported: a2 might close a loop, so nothing is trusted
     topo = topology_from({"a1": [ME, "a2"]}, ["a1"], 0.0)
-    assert not topo.is_tree_edge("a1", 0.0)
+    assert topo.edge("a1", 0.0) is Edge.UNKNOWN
     topo.learn({"a2": [0.0, ["a1"]]})
-    assert topo.is_tree_edge("a1", 0.0)
+    assert topo.edge("a1", 0.0) is Edge.TREE
     # a neighbour ME hears but that has no report of its own
     topo.heard("a3", 0.0)
-    assert not topo.is_tree_edge("a1", 0.0)
+    assert topo.edge("a1", 0.0) is Edge.UNKNOWN
 
 
 def test_report_lifetime():
@@ -119,11 +122,11 @@ def test_report_lifetime():
     topo.learn({"a1": [10.0, [ME]]})
     for t in (10.0, 10.0 + lifetime):
         topo.heard("a1", t)
-        assert topo.is_tree_edge("a1", t)
+        assert topo.edge("a1", t) is Edge.TREE
         assert "a1" in topo.gossip(t)
     t = 10.0 + lifetime + 0.01  # a1's report has expired: a1 is heard, but unknown
     topo.heard("a1", t)
-    assert not topo.is_tree_edge("a1", t)
+    assert topo.edge("a1", t) is Edge.UNKNOWN
     assert set(topo.gossip(t)) == {ME}
 
 
@@ -145,7 +148,7 @@ def test_gossip_carries_own_report_and_fresh_ones():
 
 
 # Each bad entry is newer (t = 1) than a1's good report (t = 0) and, were it accepted, would replace it or
-# mention an agent a5 that never reported, making the knowledge incomplete: is_tree_edge would turn False.
+# mention an agent a5 that never reported, making the knowledge incomplete: edge would turn UNKNOWN.
 @pytest.mark.parametrize(
     "bad",
     [
@@ -168,7 +171,7 @@ def test_malformed_gossip_is_ignored(bad):
     before = topo.gossip(1.0)
     topo.learn(bad)
     assert topo.gossip(1.0) == before
-    assert topo.is_tree_edge("a1", 1.0)
+    assert topo.edge("a1", 1.0) is Edge.TREE
 
 
 def test_malformed_entries_do_not_stop_good_ones():
@@ -176,7 +179,7 @@ def test_malformed_entries_do_not_stop_good_ones():
     topo.heard("a1", 0.0)
     topo.learn({"a2": ["now", [ME]], "a1": [0.0, [ME]]})  # a2's time is a string; a1's entry is fine
     assert set(topo.gossip(0.0)) == {ME, "a1"}
-    assert topo.is_tree_edge("a1", 0.0)
+    assert topo.edge("a1", 0.0) is Edge.TREE
 
 
 def test_neighbour_timeout():
