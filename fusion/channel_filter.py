@@ -49,7 +49,11 @@ of it can have reached the neighbour by another path) or the neighbour had fused
 (:attr:`Freshness.FRESH`). Any other new channel starts desynchronised (with a name) and returns to exact
 fusion through the re-sync agreement; taking the prior as the common information there double-counts
 whatever reached both ends before (measured ANEES 3.2-3.5 against a bound of 1.29 in
-``tests/fusion/test_resync.py``).
+``tests/fusion/test_resync.py``). The rule cannot tell a neighbour informed only by this node (on a static
+tree: the next agent down a line) from one informed by others, so it also desynchronises those, and a
+static tree is no longer exactly the centralized filter; ``check_new_links=False`` keeps the old rule (a
+new channel trusts the prior), exact on static trees, overconfident where links appear between informed
+nodes.
 """
 
 from __future__ import annotations
@@ -134,9 +138,11 @@ class ChannelFilter:
         intersect: IntersectRule | None = None,
         history: int = 64,
         me=None,
+        check_new_links: bool = True,
     ):
         self.prior = prior
         self.me = me  # this node's name: re-synchronisation is on only with one
+        self.check_new_links = check_new_links  # "New links" in the module docstring (with a name only)
         self._latest_prior = prior  # the prior advanced to the newest epoch seen, so advancing stays O(1)
         self.policy = Policy(policy)
         self.intersect = intersect or _intersect_det
@@ -212,7 +218,7 @@ class ChannelFilter:
             self.reset(neighbour)
             mine = self.freshness
             trusted = fresh is Freshness.UNSENT or (mine and (fresh or mine is Freshness.UNSENT))
-            if self.me is not None and not trusted:
+            if self.me is not None and self.check_new_links and not trusted:
                 self._channels[neighbour].synchronized = False
         return self._channels[neighbour]
 

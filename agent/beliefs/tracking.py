@@ -290,7 +290,8 @@ class Tracker:
 
     def _new_track(self, belief: Trajectory) -> Track:
         channels = None if self.config.policy == "flood" else ChannelFilter(  # flooding shares no beliefs
-            Trajectory.prior(self.model, self.epoch), self.config.policy, intersect_on_newest, me=self.me)
+            Trajectory.prior(self.model, self.epoch), self.config.policy, intersect_on_newest, me=self.me,
+            check_new_links=False)  # exact on static trees; links that appear between informed agents: use flood
         track = Track(self._next_id, belief, channels, created_epoch=self.epoch)
         self.tracks[track.id] = track
         self._next_id += 1
