@@ -8,8 +8,9 @@ two information matrices with one weight ``w in [0, 1]``:
 
 **Joint diagonalisation.** With ``S = Y_a + Y_b = L L^T`` and ``L^-1 Y_a L^-T = U diag(p) U^T``, the matrix
 ``V = L^-T U`` gives ``Y_a = V^-T diag(p) V^-1`` and ``Y_b = V^-T diag(q) V^-1`` with ``q = 1 - p`` and
-``0 < p_i < 1`` when both inputs are positive definite. Then ``Y_a^-1 = V diag(1/p) V^T``, likewise for ``b``,
-and ``(w/p + (1-w)/q)^-1 = p q / r`` with ``r = p + w (q - p)``, so ICI acts on each direction separately:
+``0 <= p_i <= 1`` (``p_i = 0`` where ``Y_a`` carries no information, ``p_i = 1`` where ``Y_b`` carries none).
+Then ``Y_a^-1 = V diag(1/p) V^T``, likewise for ``b``, and ``(w/p + (1-w)/q)^-1 = p q / r`` with
+``r = p + w (q - p)``, so ICI acts on each direction separately:
 
     Y(w) = V^-T diag(e(w)) V^-1,   e_i(w) = 1 - p_i q_i / r_i(w),
     log det Y(w) = log det S + sum_i log e_i(w),   tr Y(w)^-1 = sum_i |v_i|^2 / e_i(w).
@@ -26,19 +27,21 @@ import numpy as np
 
 from fusion import validation
 
-#: Stop when the bracket around the optimal weight is this narrow (chosen here: float64 resolution of w).
+#: Stop when a step of the weight is this small (chosen here: near the float64 resolution of w).
 _W_TOL = 1e-12
 #: Iteration cap of the safeguarded Newton search (chosen here: bisection alone reaches _W_TOL in 40 steps).
 _MAX_ITER = 100
 
 OBJECTIVES = ("det", "trace")
+#: The error when neither input informs some direction (then no ICI weight or result is defined).
+UNINFORMED = "ICI needs the two beliefs together to inform every direction (Y_a + Y_b is singular)"
 
 
 def ici_weight(Ya: np.ndarray, Yb: np.ndarray, objective: str = "det") -> float:
     """The ICI weight ``w`` (on ``Y_a``) that maximises ``log det Y(w)`` or minimises ``tr Y(w)^-1``.
 
-    Raises ``ValueError`` unless both information matrices are finite, symmetric positive definite and of one size
-    (ICI needs both covariances ``Y^-1``)."""
+    Raises ``ValueError`` unless both information matrices are finite, symmetric positive semi-definite and of one
+    size, with a positive-definite sum (together they inform every direction)."""
     if objective not in OBJECTIVES:
         raise ValueError(f"objective must be 'det' or 'trace', got {objective!r}")
     p, c = _joint_diagonalisation(Ya, Yb, vectors=objective == "trace")
@@ -60,9 +63,12 @@ def ici_weight(Ya: np.ndarray, Yb: np.ndarray, objective: str = "det") -> float:
 
 def _joint_diagonalisation(Ya, Yb, vectors: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """``p`` (the eigenvalues of ``Y_a`` relative to ``Y_a + Y_b``) and, if asked, ``c_i = |v_i|^2``."""
-    Ya = validation.as_pd(Ya, "ICI input information matrix Y_a")
-    Yb = validation.as_pd(Yb, "ICI input information matrix Y_b", Ya.shape[0])
-    L_inv = np.linalg.inv(np.linalg.cholesky(Ya + Yb))
+    Ya = validation.as_psd(Ya, "ICI input information matrix Y_a")
+    Yb = validation.as_psd(Yb, "ICI input information matrix Y_b", Ya.shape[0])
+    try:
+        L_inv = np.linalg.inv(np.linalg.cholesky(Ya + Yb))
+    except np.linalg.LinAlgError:
+        raise ValueError(UNINFORMED) from None
     M = L_inv @ Ya @ L_inv.T
     M = 0.5 * (M + M.T)
     if not vectors:
@@ -71,7 +77,8 @@ def _joint_diagonalisation(Ya, Yb, vectors: bool) -> tuple[np.ndarray, np.ndarra
     else:
         p, U = np.linalg.eigh(M)
         c = np.sum((L_inv.T @ U) ** 2, axis=0)
-    # Rounding can push a direction that one input hardly informs to 0 or 1: keep r = p + w (q - p) positive.
+    # Keep r = p + w (q - p) positive where one input carries no information (p = 0 or 1): the objective is then
+    # the limit of the covariance form, which moves the optimum off that input's end point.
     eps = np.finfo(float).eps
     return np.clip(p, eps, 1.0 - eps), c
 

@@ -248,7 +248,9 @@ def intersect_on_newest(a: Trajectory, b: Trajectory, rule: str = "ci", objectiv
     * ``"ci"``: covariance intersection (Merino (3.43)-(3.44)) with ``omega`` optimising ``objective``;
     * ``"fast_ci"``: covariance intersection with Niehsen's (2002) closed form ``omega ∝ 1 / tr(P)``;
     * ``"ici"``: inverse covariance intersection (Noack et al. 2017, :mod:`fusion.inverse_covariance_intersection`)
-      with ``omega`` optimising ``objective``.
+      with ``omega`` optimising ``objective``. ICI is not linear in the information, so its window is not
+      block-tridiagonal: it is brought back onto the chain by :func:`chain_projection`, which keeps every
+      single-state and consecutive-pair marginal — the newest state's estimate is exactly ICI's.
 
     Any ``omega`` in [0, 1] gives a consistent result (for ICI: when the correlation comes from common
     information); choosing it on the newest state makes the *current* estimate as tight as the rule allows, at
@@ -257,6 +259,34 @@ def intersect_on_newest(a: Trajectory, b: Trajectory, rule: str = "ci", objectiv
         raise ValueError(f"intersection rule must be one of {', '.join(INTERSECTION_RULES)}, got {rule!r}")
     Ya, Yb = a.current().Y, b.current().Y
     if rule == "ici":
-        return ici(a, b, ici_weight(Ya, Yb, objective))
+        omega = ici_weight(Ya, Yb, objective)
+        return ici(a, b, omega) if omega in (0.0, 1.0) else chain_projection(ici(a, b, omega))
     omega = fast_weights([Ya, Yb]) if rule == "fast_ci" else optimal_weights([Ya, Yb], objective)
     return a.intersect(b, float(omega[0]))
+
+
+def chain_projection(t: Trajectory) -> Trajectory:
+    """The trajectory with a block-tridiagonal information matrix that has the same single-state and
+    consecutive-pair marginals as ``t``.
+
+    Among all Gaussians with those marginals it is the one of maximum entropy (Dempster, "Covariance selection",
+    Biometrics 1972: the maximum-determinant completion of a banded covariance has a banded inverse), and for a
+    chain its information is the junction-tree formula
+    ``Y = sum_k E_k,k+1 P_k,k+1^-1 E_k,k+1^T - sum_{0<k<L-1} E_k P_k^-1 E_k^T``, ``y = Y mu``. A trajectory that
+    is already a chain is returned unchanged (up to rounding). Needs a positive-definite ``t.Y``."""
+    n, L = t.model.state_dim, t.model.window
+    try:
+        P = np.linalg.inv(np.linalg.cholesky(t.Y))
+    except np.linalg.LinAlgError:
+        raise UninformativeBeliefError("the trajectory's information matrix is singular: no chain projection") from None
+    P = P.T @ P
+    mean = P @ t.y
+    pairs = np.linalg.inv(np.stack([P[k * n : (k + 2) * n, k * n : (k + 2) * n] for k in range(L - 1)]))
+    singles = np.linalg.inv(np.stack([P[k * n : (k + 1) * n, k * n : (k + 1) * n] for k in range(1, L - 1)]))
+    Y = np.zeros_like(t.Y)
+    for k in range(L - 1):
+        Y[k * n : (k + 2) * n, k * n : (k + 2) * n] += pairs[k]
+    for k in range(1, L - 1):
+        Y[k * n : (k + 1) * n, k * n : (k + 1) * n] -= singles[k - 1]
+    Y = 0.5 * (Y + Y.T)
+    return t.with_information(Y @ mean, Y)

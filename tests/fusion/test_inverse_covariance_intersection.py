@@ -106,6 +106,31 @@ def test_trajectories_keep_their_grid():
     np.testing.assert_allclose(fused.Y, expected, rtol=1e-8, atol=1e-10)
 
 
+# -- uninformed directions ------------------------------------------------------------------------------
+def test_an_uninformative_input_leaves_the_other():
+    """A belief with no information at all: the optimal weight keeps the other belief (``w = 0`` keeps ``a``)."""
+    a = Gaussian.from_moments([1.0, -2.0], [[2.0, 0.5], [0.5, 1.0]])
+    for objective in ("det", "trace"):
+        assert ici(a, Gaussian.zeros(2), objective).allclose(a, rtol=1e-12)
+        assert ici(Gaussian.zeros(2), a, objective).allclose(a, rtol=1e-12)
+
+
+@pytest.mark.parametrize("w", [1e-3, 0.3, 0.9])
+def test_a_partly_uninformed_input_is_the_limit_of_the_covariance_form(w):
+    """``Y_b`` informs only x: the information form at weight ``w`` equals the covariance form with
+    ``Y_b + delta I``, ``delta -> 0`` (here ``1e-9``)."""
+    a = Gaussian.from_moments([1.0, -2.0], [[2.0, 0.5], [0.5, 1.0]])
+    b = Gaussian.from_info([3.0, 0.0], [[4.0, 0.0], [0.0, 0.0]])
+    b_reg = Gaussian.from_info(b.y, b.Y + 1e-9 * np.eye(2))
+    P, x, _, _ = ici_moments(a.mean, a.cov, b_reg.mean, b_reg.cov, w)
+    fused = ici(a, b, w)
+    np.testing.assert_allclose(fused.cov, P, rtol=1e-6)
+    np.testing.assert_allclose(fused.mean, x, rtol=1e-6)
+    best = ici(a, b, "det")
+    assert all(np.linalg.slogdet(best.Y)[1] >= np.linalg.slogdet(ici(a, b, v).Y)[1] - 1e-12
+               for v in np.linspace(0.0, 1.0, 201))
+
+
 # -- the optimal weight -------------------------------------------------------------------------------
 def grid_optimum(f):
     grid = np.linspace(0.0, 1.0, 1001)
@@ -183,12 +208,12 @@ def test_bad_inputs_are_clear_errors():
         ici(good, good, "entropy")
     with pytest.raises(ValueError, match="dimension mismatch"):
         ici(good, Gaussian.from_moments([0.0], [[1.0]]))
-    singular = Gaussian.from_info([0.0, 0.0], [[1.0, 0.0], [0.0, 0.0]])
+    x_only = Gaussian.from_info([0.0, 0.0], [[1.0, 0.0], [0.0, 0.0]])
     for omega in ("det", 0.5):
-        with pytest.raises(ValueError, match="not positive definite"):
-            ici(good, singular, omega)
-    with pytest.raises(ValueError, match="not positive definite"):
-        ici(Gaussian.zeros(2), good, 0.5)
+        with pytest.raises(ValueError, match="together to inform every direction"):
+            ici(x_only, x_only, omega)
+    with pytest.raises(ValueError, match="not positive semi-definite"):
+        ici(good, Gaussian.from_info([0.0, 0.0], -np.eye(2)))
     nan_info = Gaussian(np.zeros(2), np.array([[1.0, np.nan], [np.nan, 1.0]]))
     for omega in ("trace", 0.5):
         with pytest.raises(ValueError, match="non-finite"):
