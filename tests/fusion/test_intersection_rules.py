@@ -17,7 +17,7 @@ from fusion.covariance_intersection import ci, fast_ci
 from fusion.gaussian import Gaussian
 from fusion.inverse_covariance_intersection import ici
 from fusion.motion import ConstantVelocity
-from fusion.trajectory import Trajectory, TrajectoryModel, intersect_on_newest
+from fusion.trajectory import Trajectory, TrajectoryModel, chain_projection, intersect_on_newest
 
 ENTRIES = st.floats(min_value=-3.0, max_value=3.0, allow_nan=False, allow_infinity=False)
 
@@ -132,8 +132,9 @@ def size_of(objective):
 def test_intersect_on_newest_chooses_each_rules_weight_on_the_newest_state(objective):
     """The whole window is fused with the weight each rule chooses for the newest-state marginals: Niehsen's
     closed form for fast CI, and for CI and ICI the minimiser (dense grid) of the objective of the rule applied to
-    the marginals. The weight of a CI result is read off ``Y = w Y_a + (1-w) Y_b``; the ICI result must equal the
-    covariance form of ICI over the whole window at the grid weight (to the grid's resolution)."""
+    the marginals. The weight of a CI result is read off ``Y = w Y_a + (1-w) Y_b``; the ICI result's newest state
+    must be that of the covariance form of ICI over the whole window at the grid weight (to the grid's resolution),
+    and its window must stay block-tridiagonal."""
     a, b = two_trajectories()
     m_a, m_b = a.current(), b.current()
     size = size_of(objective)
@@ -149,10 +150,40 @@ def test_intersect_on_newest_chooses_each_rules_weight_on_the_newest_state(objec
     inv = np.linalg.inv
     w_ici = grid_argmin(lambda w: size(inv(m_a.Y + m_b.Y - inv(w * m_a.cov + (1 - w) * m_b.cov))))
     fused = intersect_on_newest(a, b, "ici", objective)
-    P_a, P_b = inv(a.Y), inv(b.Y)
-    expected = a.Y + b.Y - inv(w_ici * P_a + (1 - w_ici) * P_b)
-    np.testing.assert_allclose(fused.Y, expected, rtol=1e-5, atol=1e-6 * np.max(np.abs(expected)))
+    dense = inv(a.Y + b.Y - inv(w_ici * inv(a.Y) + (1 - w_ici) * inv(b.Y)))  # ICI's window covariance
+    newest = slice(-a.model.state_dim, None)
+    np.testing.assert_allclose(fused.current().cov, dense[newest, newest], rtol=1e-5)
+    assert_block_tridiagonal(fused.Y, a.model.state_dim)
     assert fused.epoch == a.epoch and fused.model == a.model
+
+
+def assert_block_tridiagonal(Y, n):
+    far = np.abs(np.subtract.outer(np.arange(Y.shape[0]) // n, np.arange(Y.shape[0]) // n)) > 1
+    assert np.all(Y[far] == 0.0)
+
+
+def test_chain_projection_keeps_a_chain():
+    """A trajectory is already the maximum-entropy completion of its own band: projecting changes nothing."""
+    a, _ = two_trajectories()
+    np.testing.assert_allclose(chain_projection(a).Y, a.Y, rtol=1e-9, atol=1e-9 * np.max(np.abs(a.Y)))
+    np.testing.assert_allclose(chain_projection(a).y, a.y, rtol=1e-9, atol=1e-9 * np.max(np.abs(a.y)))
+
+
+def test_chain_projection_keeps_the_band_of_the_covariance_and_raises_the_entropy():
+    """A dense belief over the window: the projection is block-tridiagonal, has the same mean, the same covariance
+    blocks on the band (every single-state and consecutive-pair marginal), and the larger determinant (Dempster)."""
+    a, _ = two_trajectories()
+    n, m = a.model.state_dim, a.model.dim
+    rng = np.random.default_rng(3)
+    G = rng.normal(size=(m, m))
+    dense = a.with_information(rng.normal(size=m), G @ G.T + 0.5 * np.eye(m))
+    projected = chain_projection(dense)
+    assert_block_tridiagonal(projected.Y, n)
+    P, Q = np.linalg.inv(dense.Y), np.linalg.inv(projected.Y)
+    band = np.abs(np.subtract.outer(np.arange(m) // n, np.arange(m) // n)) <= 1
+    np.testing.assert_allclose(Q[band], P[band], rtol=1e-8, atol=1e-10 * np.max(np.abs(P)))
+    np.testing.assert_allclose(Q @ projected.y, P @ dense.y, rtol=1e-8, atol=1e-10)
+    assert np.linalg.slogdet(Q)[1] > np.linalg.slogdet(P)[1]
 
 
 def test_intersect_on_newest_rejects_an_unknown_rule():
