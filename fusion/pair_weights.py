@@ -45,26 +45,36 @@ def ici_weight(Ya: np.ndarray, Yb: np.ndarray, objective: str = "det") -> float:
     if objective not in OBJECTIVES:
         raise ValueError(f"objective must be 'det' or 'trace', got {objective!r}")
     p, c = _joint_diagonalisation(Ya, Yb, vectors=objective == "trace")
-    q = 1.0 - p
-    pq, d = p * q, q - p
+    # n scalar terms in plain floats: numpy's per-call overhead on arrays of n = 6 would dominate the search.
+    terms = [(p_i, p_i * (1.0 - p_i), 1.0 - 2.0 * p_i, c_i) for p_i, c_i in zip(p.tolist(), c.tolist(), strict=True)]
+    det = objective == "det"
 
     def slope(w: float) -> tuple[float, float]:
-        """First and second derivative of the objective (to be minimised) at ``w``."""
-        r = p + w * d
-        e = 1.0 - pq / r
-        de = pq * d / r**2
-        dde = -2.0 * pq * d**2 / r**3
-        if c is None:  # -sum log e
-            return float(-np.sum(de / e)), float(np.sum((de**2 - e * dde) / e**2))
-        return float(-np.sum(c * de / e**2)), float(np.sum(c * (2.0 * de**2 - e * dde) / e**3))
+        """First and second derivative at ``w`` of ``-log det Y`` or ``tr Y^-1`` (both to be minimised)."""
+        g = h = 0.0
+        for p_i, pq, d, c_i in terms:  # d = q - p, r = p + w d, e = 1 - pq / r
+            r = p_i + w * d
+            e = 1.0 - pq / r
+            de = pq * d / (r * r)
+            dde = -2.0 * de * d / r
+            if det:
+                g -= de / e
+                h += (de * de - e * dde) / (e * e)
+            else:
+                g -= c_i * de / (e * e)
+                h += c_i * (2.0 * de * de - e * dde) / (e * e * e)
+        return g, h
 
     return _convex_minimum(slope)
 
 
-def _joint_diagonalisation(Ya, Yb, vectors: bool) -> tuple[np.ndarray, np.ndarray | None]:
-    """``p`` (the eigenvalues of ``Y_a`` relative to ``Y_a + Y_b``) and, if asked, ``c_i = |v_i|^2``."""
-    Ya = validation.as_psd(Ya, "ICI input information matrix Y_a")
-    Yb = validation.as_psd(Yb, "ICI input information matrix Y_b", Ya.shape[0])
+def _joint_diagonalisation(Ya, Yb, vectors: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``p`` (the eigenvalues of ``Y_a`` relative to ``Y_a + Y_b``) and ``c_i = |v_i|^2`` (ones unless asked).
+
+    ``Y_a`` is positive semi-definite exactly when every ``p_i >= 0``, and ``Y_b`` when every ``p_i <= 1``, so the
+    decomposition doubles as the check of its inputs."""
+    Ya = _symmetric(Ya, "ICI input information matrix Y_a")
+    Yb = _symmetric(Yb, "ICI input information matrix Y_b", Ya.shape[0])
     try:
         L_inv = np.linalg.inv(np.linalg.cholesky(Ya + Yb))
     except np.linalg.LinAlgError:
@@ -73,14 +83,25 @@ def _joint_diagonalisation(Ya, Yb, vectors: bool) -> tuple[np.ndarray, np.ndarra
     M = 0.5 * (M + M.T)
     if not vectors:
         p = np.linalg.eigvalsh(M)
-        c = None
+        c = np.ones_like(p)
     else:
         p, U = np.linalg.eigh(M)
         c = np.sum((L_inv.T @ U) ** 2, axis=0)
+    for name, bad in (("Y_a", p[0] < -validation.PSD_RTOL), ("Y_b", p[-1] > 1.0 + validation.PSD_RTOL)):
+        if bad:
+            raise ValueError(f"ICI input information matrix {name} is not positive semi-definite")
     # Keep r = p + w (q - p) positive where one input carries no information (p = 0 or 1): the objective is then
     # the limit of the covariance form, which moves the optimum off that input's end point.
     eps = np.finfo(float).eps
     return np.clip(p, eps, 1.0 - eps), c
+
+
+def _symmetric(M, name: str, size: int | None = None) -> np.ndarray:
+    """A finite square matrix, symmetric to ``validation.SYMMETRY_RTOL`` (the cheap part of ``validation.as_psd``)."""
+    M = validation.as_square(M, name, size)
+    if np.max(np.abs(M - M.T)) > validation.SYMMETRY_RTOL * max(1.0, float(np.max(np.abs(M)))):
+        raise ValueError(f"{name} is not symmetric")
+    return M
 
 
 def _convex_minimum(slope) -> float:

@@ -152,7 +152,8 @@ def test_intersect_on_newest_chooses_each_rules_weight_on_the_newest_state(objec
     fused = intersect_on_newest(a, b, "ici", objective)
     dense = inv(a.Y + b.Y - inv(w_ici * inv(a.Y) + (1 - w_ici) * inv(b.Y)))  # ICI's window covariance
     newest = slice(-a.model.state_dim, None)
-    np.testing.assert_allclose(fused.current().cov, dense[newest, newest], rtol=1e-5)
+    scale = np.max(np.abs(dense))
+    np.testing.assert_allclose(fused.current().cov, dense[newest, newest], rtol=1e-5, atol=1e-12 * scale)
     assert_block_tridiagonal(fused.Y, a.model.state_dim)
     assert fused.epoch == a.epoch and fused.model == a.model
 

@@ -212,8 +212,11 @@ def test_bad_inputs_are_clear_errors():
     for omega in ("det", 0.5):
         with pytest.raises(ValueError, match="together to inform every direction"):
             ici(x_only, x_only, omega)
-    with pytest.raises(ValueError, match="not positive semi-definite"):
-        ici(good, Gaussian.from_info([0.0, 0.0], -np.eye(2)))
+    for Y_a, Y_b, name in ((2 * np.eye(2), -0.5 * np.eye(2), "Y_b"), (-0.5 * np.eye(2), 2 * np.eye(2), "Y_a")):
+        with pytest.raises(ValueError, match=f"{name} is not positive semi-definite"):
+            ici_weight(Y_a, Y_b)
+    with pytest.raises(ValueError, match="Y_a is not symmetric"):
+        ici_weight(np.array([[2.0, 1.0], [0.0, 2.0]]), np.eye(2))
     nan_info = Gaussian(np.zeros(2), np.array([[1.0, np.nan], [np.nan, 1.0]]))
     for omega in ("trace", 0.5):
         with pytest.raises(ValueError, match="non-finite"):
