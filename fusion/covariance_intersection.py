@@ -43,10 +43,16 @@ def fast_ci(beliefs: Sequence):
     A belief whose information matrix is singular has an unbounded covariance and gets weight 0."""
     beliefs = list(beliefs)
     _check_beliefs(beliefs)
-    inv_traces = np.array([_inverse_trace_of_cov(b.Y) for b in beliefs])
+    return combine(beliefs, fast_weights([b.Y for b in beliefs]))
+
+
+def fast_weights(matrices: Sequence[np.ndarray]) -> np.ndarray:
+    """Niehsen's (2002) closed-form weights ``w_i = (1 / tr P_i) / sum_j (1 / tr P_j)`` for the information
+    matrices ``Y_i = P_i^-1``; a singular ``Y_i`` (unbounded covariance) gets weight 0."""
+    inv_traces = np.array([_inverse_trace_of_cov(Y) for Y in matrices])
     if inv_traces.sum() <= 0.0:
         raise ValueError("fast CI needs at least one belief with a finite covariance")
-    return combine(beliefs, inv_traces / inv_traces.sum())
+    return inv_traces / inv_traces.sum()
 
 
 def combine(beliefs: Sequence, weights: Sequence[float]):

@@ -127,6 +127,11 @@ class Gaussian:
         """The belief raised to a power: ``(w y, w Y)`` (one term of a weighted exponential product)."""
         return Gaussian(weight * self.y, weight * self.Y)
 
+    def with_information(self, y: np.ndarray, Y: np.ndarray) -> Gaussian:
+        """A belief of the same kind carrying ``(y, Y)`` (for rules such as inverse covariance intersection that
+        compute the information pair themselves); trusted, like the constructor."""
+        return Gaussian(y, Y)
+
     def predict(self, F: np.ndarray, Q: np.ndarray, F_inv: np.ndarray | None = None) -> Gaussian:
         """Information-filter prediction through ``x' = F x + w``, ``w ~ N(0, Q)`` (Merino Alg. 3.2).
 

@@ -29,7 +29,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fusion import validation
+from fusion.covariance_intersection import fast_weights, optimal_weights
 from fusion.gaussian import Gaussian, UninformativeBeliefError
+from fusion.inverse_covariance_intersection import ici
+from fusion.pair_weights import ici_weight
 
 
 @dataclass(frozen=True)
@@ -197,6 +200,10 @@ class Trajectory:
     def scaled(self, weight: float) -> Trajectory:
         return Trajectory(weight * self.y, weight * self.Y, self.epoch, self.model)
 
+    def with_information(self, y: np.ndarray, Y: np.ndarray) -> Trajectory:
+        """The trajectory on this grid and window carrying ``(y, Y)`` (see ``Gaussian.with_information``)."""
+        return Trajectory(y, Y, self.epoch, self.model)
+
     def _check_aligned(self, other) -> None:
         if not isinstance(other, Trajectory) or other.model != self.model:
             raise ValueError("trajectories must share one TrajectoryModel (grid, window and motion)")
@@ -230,12 +237,56 @@ def _slide(y: np.ndarray, Y: np.ndarray, n: int, factor: np.ndarray) -> tuple[np
     return y_big[n:] - Y0r.T @ sol[:, -1], 0.5 * (Yr + Yr.T)
 
 
-def intersect_on_newest(a: Trajectory, b: Trajectory, objective: str = "det") -> Trajectory:
-    """Covariance intersection of two trajectories, with ``omega`` optimised on their newest-state
-    marginals (``n x n``) rather than on the whole window (``Ln x Ln``). Any ``omega`` in [0, 1] gives
-    a consistent result (Merino (3.43)-(3.44)); this choice makes the *current* estimate as tight as
-    the rule allows, at a fraction of the cost."""
-    from fusion.covariance_intersection import optimal_weights
+#: The intersection rules :func:`intersect_on_newest` knows (``[tracking] intersection``).
+INTERSECTION_RULES = ("ci", "fast_ci", "ici")
 
-    omega = optimal_weights([a.current().Y, b.current().Y], objective)[0]
-    return a.intersect(b, float(omega))
+
+def intersect_on_newest(a: Trajectory, b: Trajectory, rule: str = "ci", objective: str = "det") -> Trajectory:
+    """A conservative fusion of two trajectories whose weight ``omega`` is chosen on their newest-state
+    marginals (``n x n``) rather than on the whole window (``Ln x Ln``):
+
+    * ``"ci"``: covariance intersection (Merino (3.43)-(3.44)) with ``omega`` optimising ``objective``;
+    * ``"fast_ci"``: covariance intersection with Niehsen's (2002) closed form ``omega ∝ 1 / tr(P)``;
+    * ``"ici"``: inverse covariance intersection (Noack et al. 2017, :mod:`fusion.inverse_covariance_intersection`)
+      with ``omega`` optimising ``objective``. ICI is not linear in the information, so its window is not
+      block-tridiagonal: it is brought back onto the chain by :func:`chain_projection`, which keeps every
+      single-state and consecutive-pair marginal — the newest state's estimate is exactly ICI's.
+
+    Any ``omega`` in [0, 1] gives a consistent result (for ICI: when the correlation comes from common
+    information); choosing it on the newest state makes the *current* estimate as tight as the rule allows, at
+    a fraction of the cost."""
+    if rule not in INTERSECTION_RULES:
+        raise ValueError(f"intersection rule must be one of {', '.join(INTERSECTION_RULES)}, got {rule!r}")
+    Ya, Yb = a.current().Y, b.current().Y
+    if rule == "ici":
+        omega = ici_weight(Ya, Yb, objective)
+        return ici(a, b, omega) if omega in (0.0, 1.0) else chain_projection(ici(a, b, omega))
+    omega = fast_weights([Ya, Yb]) if rule == "fast_ci" else optimal_weights([Ya, Yb], objective)
+    return a.intersect(b, float(omega[0]))
+
+
+def chain_projection(t: Trajectory) -> Trajectory:
+    """The trajectory with a block-tridiagonal information matrix that has the same single-state and
+    consecutive-pair marginals as ``t``.
+
+    Among all Gaussians with those marginals it is the one of maximum entropy (Dempster, "Covariance selection",
+    Biometrics 1972: the maximum-determinant completion of a banded covariance has a banded inverse), and for a
+    chain its information is the junction-tree formula
+    ``Y = sum_k E_k,k+1 P_k,k+1^-1 E_k,k+1^T - sum_{0<k<L-1} E_k P_k^-1 E_k^T``, ``y = Y mu``. A trajectory that
+    is already a chain is returned unchanged (up to rounding). Needs a positive-definite ``t.Y``."""
+    n, L = t.model.state_dim, t.model.window
+    try:
+        P = np.linalg.inv(np.linalg.cholesky(t.Y))
+    except np.linalg.LinAlgError:
+        raise UninformativeBeliefError("the trajectory's information matrix is singular: no chain projection") from None
+    P = P.T @ P
+    mean = P @ t.y
+    pairs = np.linalg.inv(np.stack([P[k * n : (k + 2) * n, k * n : (k + 2) * n] for k in range(L - 1)]))
+    singles = np.linalg.inv(np.stack([P[k * n : (k + 1) * n, k * n : (k + 1) * n] for k in range(1, L - 1)]))
+    Y = np.zeros_like(t.Y)
+    for k in range(L - 1):
+        Y[k * n : (k + 2) * n, k * n : (k + 2) * n] += pairs[k]
+    for k in range(1, L - 1):
+        Y[k * n : (k + 1) * n, k * n : (k + 1) * n] -= singles[k - 1]
+    Y = 0.5 * (Y + Y.T)
+    return t.with_information(Y @ mean, Y)

@@ -40,6 +40,7 @@ decentralized fusion equals the centralized filter exactly.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -290,7 +291,8 @@ class Tracker:
 
     def _new_track(self, belief: Trajectory) -> Track:
         channels = None if self.config.policy == "flood" else ChannelFilter(  # flooding shares no beliefs
-            Trajectory.prior(self.model, self.epoch), self.config.policy, intersect_on_newest, me=self.me,
+            Trajectory.prior(self.model, self.epoch), self.config.policy,
+            partial(intersect_on_newest, rule=self.config.intersection), me=self.me,
             check_new_links=False)  # exact on static trees; links that appear between informed agents: use flood
         track = Track(self._next_id, belief, channels, created_epoch=self.epoch)
         self.tracks[track.id] = track
@@ -345,7 +347,9 @@ class Tracker:
                 except UninformativeBeliefError:  # not fully observable: it cannot be compared, so it is not merged
                     continue
                 epoch = max(keep.belief.epoch, drop.belief.epoch)
-                keep.belief = intersect_on_newest(keep.belief.advanced_to(epoch), drop.belief.advanced_to(epoch))
+                keep.belief = intersect_on_newest(
+                    keep.belief.advanced_to(epoch), drop.belief.advanced_to(epoch), self.config.intersection
+                )
                 keep.last_measured = max(keep.last_measured, drop.last_measured)
                 keep.channels.desynchronize_all()
                 self.labels = {k: (keep_id if v == drop_id else v) for k, v in self.labels.items()}

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.beliefs.particle_init import ParticleInitConfig
+from fusion.trajectory import INTERSECTION_RULES
 
 POLICIES = ("naive", "exact", "ci", "hybrid", "flood")
 
@@ -31,6 +32,7 @@ class TrackerConfig:
     terrain_sigma: float = 2.0  # DEM error [m]; chosen here
     sensor_sigma: float = 0.5  # camera position error [m] (GPS); chosen here
     policy: str = "hybrid"  # naive, exact, ci, hybrid (channel filters: agent.beliefs.tracks) or flood
+    intersection: str = "ci"  # where the common information is unknown: "ci", "fast_ci" or "ici" (intersect_on_newest)
     initiation: str = "ray"  # "ray" (the ray's ground point) or "particles" (agent.beliefs.particle_init, Merino §5.3)
     particle_init: ParticleInitConfig = field(default_factory=ParticleInitConfig)  # [tracking.particle_init]
 
@@ -56,3 +58,7 @@ class TrackerConfig:
             raise ValueError(f"tracking.measurement must be bearing or position, got {self.measurement!r}")
         if self.policy not in POLICIES:
             raise ValueError(f"tracking.policy must be one of {', '.join(POLICIES)}, got {self.policy!r}")
+        if self.intersection not in INTERSECTION_RULES:
+            raise ValueError(
+                f"tracking.intersection must be one of {', '.join(INTERSECTION_RULES)}, got {self.intersection!r}"
+            )
