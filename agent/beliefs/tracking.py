@@ -32,9 +32,13 @@ decentralized fusion equals the centralized filter exactly.
   a track nobody has measured for ``stale_after`` seconds, or one whose position standard deviation
   grows past ``max_position_std`` is deleted: peers echoing each other cannot keep a ghost alive.
 * **Merging**: two confirmed tracks whose positions pass the track-to-track gate are one target seen
-  twice (e.g. initiated by two agents before they heard each other); they are merged by covariance
-  intersection, labels move to the surviving track and its channels fall back to intersection (its
-  common information with each peer is no longer known).
+  twice (e.g. initiated by two agents before they heard each other); they are merged by the configured
+  intersection rule (``[tracking] intersection``: ci, fast_ci or ici), labels move to the surviving track
+  and its channels fall back to intersection (its common information with each peer is no longer known)
+  until they re-synchronise (:mod:`fusion.resync`).
+* **Sharing**: under the channel-filter policies peers' tracks arrive through :meth:`Tracker.fuse_remote`;
+  under ``flood`` (:mod:`agent.beliefs.flood`) peers' detections arrive and go through :meth:`Tracker.update`
+  like this agent's own, associated at their own time.
 """
 
 from __future__ import annotations
