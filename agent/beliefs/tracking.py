@@ -397,11 +397,15 @@ class Tracker:
 
     # -- views ----------------------------------------------------------------------------------
     def estimates(self, confirmed_only: bool = True) -> list[tuple[int, Gaussian]]:
+        """The tracks' newest-state estimates, leaving out any whose state is not fully observable (its
+        covariance does not exist: e.g. after an intersection with a belief uninformed in some direction)."""
         out = []
         for track in self.tracks.values():
             if track.confirmed or not confirmed_only:
                 try:
-                    out.append((track.id, track.estimate()))
+                    est = track.estimate()
+                    est.cov  # noqa: B018 - raises if some direction of the state is unobserved
                 except UninformativeBeliefError:
                     continue
+                out.append((track.id, est))
         return out
