@@ -13,7 +13,7 @@ The real runtime (agents over Zenoh, or the lockstep bus) does the same through 
 
 from __future__ import annotations
 
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Iterable
 
 import numpy as np
@@ -62,19 +62,29 @@ def bridges(n: int, edges: Iterable[tuple[int, int]]) -> set[frozenset]:
     return result
 
 
+def hop_distances(edges: Iterable, source) -> dict:
+    """Breadth-first hop counts from ``source`` over undirected ``edges`` (pairs of nodes); nodes out of reach
+    are absent."""
+    neighbours: dict = {}
+    for edge in edges:
+        a, b = tuple(edge)
+        neighbours.setdefault(a, set()).add(b)
+        neighbours.setdefault(b, set()).add(a)
+    distance, frontier = {source: 0}, deque([source])
+    while frontier:
+        node = frontier.popleft()
+        for peer in sorted(neighbours.get(node, ())):
+            if peer not in distance:
+                distance[peer] = distance[node] + 1
+                frontier.append(peer)
+    return distance
+
+
 def _connected(edges: Iterable[tuple[int, int]], a: int, b: int) -> bool:
     """Is ``b`` reachable from ``a`` over ``edges``? Over the union of the graphs seen during an outage this
     says whether information may have passed between the two ends by other paths, even paths that never
     existed all at once (a relay that met one end, then the other)."""
-    reached, frontier = {a}, [a]
-    while frontier:
-        u = frontier.pop()
-        for x, y in edges:
-            for p, q in ((x, y), (y, x)):
-                if p == u and q not in reached:
-                    reached.add(q)
-                    frontier.append(q)
-    return b in reached
+    return b in hop_distances(edges, a)
 
 
 class FilterNetwork:

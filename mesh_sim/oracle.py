@@ -19,8 +19,6 @@
 
 from __future__ import annotations
 
-from collections import deque
-
 import numpy as np
 
 from agent.beliefs.tracking import Tracker
@@ -28,6 +26,7 @@ from agent.beliefs.tracks import FUTURE_EPOCHS
 from agent.evaluation import TrackEvaluator
 from agent.net import wire
 from agent.sensors.bearing import Bearing
+from fusion.network import hop_distances
 from mesh_sim.imm_oracle import ImmTracker
 from mesh_sim.target_set import truth_snapshot
 from perception.terrain import terrain_from_config
@@ -94,23 +93,6 @@ def _stamp(value) -> float:
 
 
 
-def hop_distances(edges, source: str) -> dict[str, int]:
-    """Breadth-first hop counts from ``source`` over undirected ``edges`` (pairs of names)."""
-    neighbours: dict[str, set[str]] = {}
-    for edge in edges:
-        a, b = tuple(edge)
-        neighbours.setdefault(a, set()).add(b)
-        neighbours.setdefault(b, set()).add(a)
-    distance, frontier = {source: 0}, deque([source])
-    while frontier:
-        node = frontier.popleft()
-        for peer in sorted(neighbours.get(node, ())):
-            if peer not in distance:
-                distance[peer] = distance[node] + 1
-                frontier.append(peer)
-    return distance
-
-
 class InFlightOracle:
     """One :class:`Oracle` per agent, fed every bearing after the hops it needs to reach that agent."""
 
@@ -120,15 +102,18 @@ class InFlightOracle:
         self.step = scenario.step
         self.oracles = {name: Oracle(scenario) for name in self.names}
         self._pending: list[tuple[int, str, wire.Envelope]] = []  # (release step, agent, bearings)
+        self._graph: tuple[int, object] | None = None  # (step, the radio graph's edges then): once per step
 
-    def _edges(self, t: float):
-        if self.plan is None:
-            return [(a, b) for i, a in enumerate(self.names) for b in self.names[i + 1:]]
-        return self.plan.edges_at(t)
+    def _edges(self, k: int, t: float):
+        if self._graph is None or self._graph[0] != k:
+            edges = ([(a, b) for i, a in enumerate(self.names) for b in self.names[i + 1:]] if self.plan is None
+                     else self.plan.edges_at(t))
+            self._graph = (k, edges)
+        return self._graph[1]
 
     def add(self, env: wire.Envelope, now: float) -> None:
         k = int(round(now / self.step))
-        for name, hops in hop_distances(self._edges(now), env.origin).items():
+        for name, hops in hop_distances(self._edges(k, now), env.origin).items():
             if name in self.oracles:
                 self._pending.append((k + hops, name, env))
 

@@ -6,7 +6,8 @@ import numpy as np
 
 from agent.config import AgentScenario
 from agent.net import wire
-from mesh_sim.oracle import InFlightOracle, hop_distances
+from fusion.network import hop_distances
+from mesh_sim.oracle import InFlightOracle
 
 STEP = 0.2
 
