@@ -82,13 +82,14 @@ class TrajectoryModel:
 class Trajectory:
     """A Gaussian over the last ``model.window`` states in information form (oldest state first)."""
 
-    __slots__ = ("y", "Y", "epoch", "model")
+    __slots__ = ("y", "Y", "epoch", "model", "_states")
 
     def __init__(self, y: np.ndarray, Y: np.ndarray, epoch: int, model: TrajectoryModel):
         self.y = y
         self.Y = Y
         self.epoch = epoch
         self.model = model
+        self._states: dict[int, Gaussian] = {}  # offset -> marginal, computed once: a belief is never changed
 
     @classmethod
     def prior(cls, model: TrajectoryModel, epoch: int) -> Trajectory:
@@ -138,31 +139,62 @@ class Trajectory:
         return self.update(H, model.R_inv, model.residual(z, model.h(mu)) + H @ mu, offset)
 
     def state(self, offset: int = 0) -> Gaussian:
-        """The marginal belief on one state of the window (Merino App. A); ``offset=0`` is the newest."""
-        if offset == 0:
-            return self.current()
-        block = self._block(offset)
-        return Gaussian(self.y, self.Y).marginal(range(block.start, block.stop))
+        """The marginal belief on one state of the window (Merino App. A); ``offset=0`` is the newest. Each
+        is computed once per belief (association and the update that follows ask for the same one)."""
+        known = self._states.get(offset)
+        if known is None:
+            self._block(offset)  # ValueError outside the window
+            known = self._states[offset] = self._marginal(self.model.window - 1 - offset)
+        return known
 
     def current(self) -> Gaussian:
-        """The marginal belief on the newest state, by forward elimination of the older states.
+        """The marginal belief on the newest state."""
+        return self.state(0)
+
+    def _marginal(self, k: int) -> Gaussian:
+        """The marginal belief on state ``k`` of the window (0 the oldest), by eliminating the other states.
 
         The information matrix is block-tridiagonal (the process factors couple consecutive states
-        only, updates touch one block, and marginalising the oldest state keeps the structure), so
-        eliminating states oldest first applies Merino (3.31)-(3.32) once per state:
-        ``Y_kk <- Y_kk - Y_k,k-1 Y_k-1^-1 Y_k-1,k`` with ``n x n`` blocks only — O(L n^3), not O((L n)^3)."""
-        n, L = self.model.state_dim, self.model.window
-        Y_prev, y_prev = self.Y[:n, :n], self.y[:n]
-        for k in range(1, L):
-            cur = slice(k * n, (k + 1) * n)
-            coupling = self.Y[cur, (k - 1) * n : k * n]
-            try:
-                sol = np.linalg.solve(Y_prev, np.concatenate([coupling.T, y_prev[:, None]], axis=1))
-            except np.linalg.LinAlgError:
-                raise UninformativeBeliefError(f"state {k - 1} of the window carries singular information") from None
+        only, updates touch one block, and marginalising the oldest state keeps the structure), so the
+        states older than ``k`` are eliminated oldest first and the newer ones newest first, each by
+        Merino (3.31)-(3.32) with ``n x n`` blocks only — ``Y_jj <- Y_jj - Y_j,i Y_i^-1 Y_i,j`` for the
+        neighbour ``i`` eliminated into ``j`` — which is O(L n^3), not O((L n)^3)."""
+        L = self.model.window
+        Y_k, y_k = self._chain(range(0, k + 1))
+        if k < L - 1:  # the newer states' chain adds its own term to state k
+            Y_right, y_right = self._chain(range(L - 1, k, -1))
+            coupling = self._coupling(k, k + 1)
+            sol = self._solve(Y_right, coupling.T, y_right, k + 1)
+            Y_k = Y_k - coupling @ sol[:, :-1]
+            y_k = y_k - coupling @ sol[:, -1]
+        return Gaussian(y_k, 0.5 * (Y_k + Y_k.T))
+
+    def _chain(self, order) -> tuple[np.ndarray, np.ndarray]:
+        """Eliminate the states of ``order`` one after the other into the next; the last one's block then."""
+        order = list(order)
+        n = self.model.state_dim
+        first = slice(order[0] * n, (order[0] + 1) * n)
+        Y_prev, y_prev = self.Y[first, first], self.y[first]
+        for prev, j in zip(order, order[1:], strict=False):
+            cur = slice(j * n, (j + 1) * n)
+            coupling = self._coupling(j, prev)
+            sol = self._solve(Y_prev, coupling.T, y_prev, prev)
             Y_prev = self.Y[cur, cur] - coupling @ sol[:, :-1]
             y_prev = self.y[cur] - coupling @ sol[:, -1]
-        return Gaussian(y_prev, 0.5 * (Y_prev + Y_prev.T))
+        return Y_prev, y_prev
+
+    def _coupling(self, j: int, i: int) -> np.ndarray:
+        """The off-diagonal block ``Y_j,i`` between states ``j`` and ``i`` of the window."""
+        n = self.model.state_dim
+        return self.Y[j * n : (j + 1) * n, i * n : (i + 1) * n]
+
+    @staticmethod
+    def _solve(Y_i: np.ndarray, coupling_t: np.ndarray, y_i: np.ndarray, i: int) -> np.ndarray:
+        """``Y_i^-1 [Y_i,j | y_i]``; ``UninformativeBeliefError`` when state ``i`` carries singular information."""
+        try:
+            return np.linalg.solve(Y_i, np.concatenate([coupling_t, y_i[:, None]], axis=1))
+        except np.linalg.LinAlgError:
+            raise UninformativeBeliefError(f"state {i} of the window carries singular information") from None
 
     def _block(self, offset: int) -> slice:
         L, n = self.model.window, self.model.state_dim

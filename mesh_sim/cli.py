@@ -101,6 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--details", action="store_true", help="with --tree: also list each pair's differences")
     compare.add_argument("--plain", action="store_true", help="plain lines instead of a table")
     compare.add_argument("--limit", type=_positive_int, default=50, help="list at most N differences (default 50)")
+    compare.add_argument("--rtol", type=float, default=0.0,
+                         help="floats equal to this relative tolerance, arrays compared by their sums (default 0: "
+                              "bit for bit); e.g. 1e-6 across numpy/SciPy/OpenCV releases")
     return parser
 
 
@@ -214,7 +217,8 @@ def _compare(args) -> int:
     from mesh_sim.run_compare import RunFolderError, compare, compare_tree, difference_lines, difference_table
 
     try:
-        found = compare_tree(args.before, args.after) if args.tree else compare(args.before, args.after)
+        found = (compare_tree(args.before, args.after, args.rtol) if args.tree
+                 else compare(args.before, args.after, args.rtol))
     except (RunFolderError, OSError, ValueError) as err:
         print(f"skymesh compare: {err}", file=sys.stderr)
         return EXIT_USAGE
@@ -229,7 +233,8 @@ def _compare(args) -> int:
 
     if not args.tree:
         if not found:
-            print(f"identical: {args.before} and {args.after} (volatile fields aside)")
+            within = f", floats within {args.rtol:g}" if args.rtol else ""
+            print(f"identical: {args.before} and {args.after} (volatile fields aside{within})")
             return 0
         show(found, f"{len(found)} difference(s): {args.before} -> {args.after}")
         return 1

@@ -21,14 +21,20 @@ by running every shipped scenario twice and diffing), so they are removed before
 
 A *snapshot* (:func:`snapshot`) is the same content in a small, JSON-serialisable form: the stripped
 ``metrics.json`` in full, the other JSON files (copies of parts of ``metrics.json``) and every array as a
-SHA-256 digest. The golden-run regression test (``tests/mesh_sim/test_golden_runs.py``) stores one per
-run and checks a fresh run against it with :func:`diff`.
+SHA-256 digest beside its sum and sum of squares. The golden-run regression test
+(``tests/mesh_sim/test_golden_runs.py``) stores one per run and checks a fresh run against it with :func:`diff`.
+
+``diff(..., rtol=r)`` (``skymesh compare --rtol R``) accepts floats equal to a relative (and absolute)
+tolerance ``r`` instead of bit for bit, and then compares arrays by their sums, not their digests: a new
+numpy, SciPy or OpenCV release changes the last bits of a run (sums in another order, another BLAS
+kernel), which is not a change of behaviour; a digest cannot say how far apart two arrays are.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 import struct
 from collections.abc import Iterator
@@ -111,7 +117,8 @@ def digested(files: dict[str, Any]) -> dict[str, Any]:
     for name, content in files.items():
         if name == ARRAYS:
             out[name] = {key: {"dtype": str(a.dtype), "shape": list(a.shape),
-                               "sha256": hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()}
+                               "sha256": hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest(),
+                               **_sums(a)}
                          for key, a in content.items()}
         elif name == "metrics.json":
             out[name] = content
@@ -119,6 +126,14 @@ def digested(files: dict[str, Any]) -> dict[str, Any]:
             canonical = json.dumps(content, sort_keys=True, separators=(",", ":"))
             out[name] = {"sha256": hashlib.sha256(canonical.encode()).hexdigest()}
     return out
+
+
+def _sums(a: np.ndarray) -> dict[str, float]:
+    """An array's sum and sum of squares (float64), which a tolerant :func:`diff` compares (numbers only)."""
+    if a.dtype.kind not in "biuf":
+        return {}
+    values = a.astype(float)
+    return {"sum": float(values.sum()), "sum_squares": float((values * values).sum())}
 
 
 def strip(value: Any, path: tuple[str, ...], run_dir: Path | None = None) -> Any:
@@ -139,9 +154,15 @@ def _mask(text: Any, run_dir: Path | None) -> Any:
     return FLEET.sub("<fleet>", RUN_FOLDER.sub("<run>", text))
 
 
-def diff(before: dict[str, Any], after: dict[str, Any]) -> list[Difference]:
-    """Every difference between two :func:`load_run` (or two :func:`snapshot`) results, exact; paths read
-    ``metrics.json: agents[0].targets[2].rmse``."""
+def diff(before: dict[str, Any], after: dict[str, Any], rtol: float = 0.0) -> list[Difference]:
+    """Every difference between two :func:`load_run` (or two :func:`snapshot`) results; paths read
+    ``metrics.json: agents[0].targets[2].rmse``. Exact with ``rtol = 0``; otherwise floats within ``rtol``
+    (relative, or absolute near zero) are equal, and digests (``sha256``) and the raw arrays of a
+    :func:`load_run` are compared by their sums (:func:`_sums`)."""
+    if not (math.isfinite(rtol) and rtol >= 0):
+        raise ValueError(f"the tolerance must be a finite number >= 0, got {rtol!r}")
+    if rtol > 0:
+        before, after = _tolerant_view(before), _tolerant_view(after)
     out: list[Difference] = []
     for name in [*before, *(k for k in after if k not in before)]:
         if name not in after:
@@ -149,11 +170,23 @@ def diff(before: dict[str, Any], after: dict[str, Any]) -> list[Difference]:
         elif name not in before:
             out.append(Difference(name, MISSING, "present"))
         else:
-            out.extend(_walk(before[name], after[name], f"{name}:"))
+            out.extend(_walk(before[name], after[name], f"{name}:", rtol))
     return out
 
 
-def _walk(a: Any, b: Any, path: str) -> Iterator[Difference]:
+def _tolerant_view(files: dict[str, Any]) -> dict[str, Any]:
+    """What a tolerant :func:`diff` compares: arrays as their sums, digests left out."""
+    def view(value: Any) -> Any:
+        if isinstance(value, np.ndarray):
+            return {"dtype": str(value.dtype), "shape": list(value.shape), **_sums(value)}
+        if isinstance(value, dict):
+            return {k: view(v) for k, v in value.items() if k != "sha256"}
+        return value
+
+    return {name: view(content) for name, content in files.items()}
+
+
+def _walk(a: Any, b: Any, path: str, rtol: float = 0.0) -> Iterator[Difference]:
     if isinstance(a, dict) and isinstance(b, dict):
         for key in [*a, *(k for k in b if k not in a)]:
             sub = f"{path} {key}" if path.endswith(":") else f"{path}.{key}"
@@ -162,7 +195,7 @@ def _walk(a: Any, b: Any, path: str) -> Iterator[Difference]:
             elif key not in a:
                 yield Difference(sub, MISSING, _show(b[key]))
             else:
-                yield from _walk(a[key], b[key], sub)
+                yield from _walk(a[key], b[key], sub, rtol)
     elif isinstance(a, list) and isinstance(b, list):
         for i in range(max(len(a), len(b))):
             sub = f"{path}[{i}]"
@@ -171,13 +204,13 @@ def _walk(a: Any, b: Any, path: str) -> Iterator[Difference]:
             elif i >= len(a):
                 yield Difference(sub, MISSING, _show(b[i]))
             else:
-                yield from _walk(a[i], b[i], sub)
+                yield from _walk(a[i], b[i], sub, rtol)
     elif isinstance(a, np.ndarray) and isinstance(b, np.ndarray):
         if a.dtype != b.dtype or a.shape != b.shape:
             yield Difference(path, _show(a), _show(b))
         elif np.ascontiguousarray(a).tobytes() != np.ascontiguousarray(b).tobytes():
             yield Difference(path, _show(a), _array_change(a, b))
-    elif not _same(a, b):
+    elif not _same(a, b, rtol):
         yield Difference(path, _show(a), _show(b))
 
 
@@ -194,11 +227,14 @@ def _array_change(a: np.ndarray, b: np.ndarray) -> str:
     return f"{n} of {a.size} elements differ"
 
 
-def _same(a: Any, b: Any) -> bool:
-    """Equal and of the same type; floats bit for bit (so NaN equals the same NaN, -0.0 is not 0.0)."""
+def _same(a: Any, b: Any, rtol: float = 0.0) -> bool:
+    """Equal and of the same type; floats bit for bit (so NaN equals the same NaN, -0.0 is not 0.0), or
+    within ``rtol`` when it is positive."""
     if type(a) is not type(b):
         return False
     if isinstance(a, float):
+        if rtol > 0 and math.isclose(a, b, rel_tol=rtol, abs_tol=rtol):
+            return True
         return struct.pack("<d", a) == struct.pack("<d", b)
     return a == b
 
@@ -214,9 +250,9 @@ def _show(value: Any, width: int = 80) -> str:
     return repr(value)
 
 
-def compare(before: str | Path, after: str | Path) -> list[Difference]:
-    """The differences between two run folders (:class:`RunFolderError` if either is not one)."""
-    return diff(load_run(before), load_run(after))
+def compare(before: str | Path, after: str | Path, rtol: float = 0.0) -> list[Difference]:
+    """The differences between two run folders (:class:`RunFolderError` if either is not one); see :func:`diff`."""
+    return diff(load_run(before), load_run(after), rtol)
 
 
 @dataclass(frozen=True)
@@ -238,7 +274,7 @@ class Pair:
         return f"{self.name}: identical" if n == 0 else f"{self.name}: {n} difference{'s' if n > 1 else ''}"
 
 
-def compare_tree(before_root: str | Path, after_root: str | Path) -> list[Pair]:
+def compare_tree(before_root: str | Path, after_root: str | Path, rtol: float = 0.0) -> list[Pair]:
     """Pair the sub-folders of two roots by name and compare each pair (a name on one side only, or a
     sub-folder that is not a run folder, is a pair that could not be compared)."""
     roots = [Path(before_root), Path(after_root)]
@@ -255,7 +291,7 @@ def compare_tree(before_root: str | Path, after_root: str | Path) -> list[Pair]:
             pairs.append(Pair(name, [], f"missing in {side} ({roots[side == 'AFTER']})"))
             continue
         try:
-            pairs.append(Pair(name, compare(roots[0] / name, roots[1] / name)))
+            pairs.append(Pair(name, compare(roots[0] / name, roots[1] / name, rtol)))
         except (RunFolderError, OSError, ValueError) as err:
             pairs.append(Pair(name, [], str(err)))
     return pairs

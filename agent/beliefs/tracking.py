@@ -90,13 +90,10 @@ class Track:
     last_measured: float = 0.0  # simulation time of the newest measurement fused into this track
     truth_id: str | None = None  # only the oracle, which associates by label, sets this
     fusions: dict = field(default_factory=dict)  # method -> count
-    _estimate: tuple | None = None  # (belief it was computed from, its newest-state marginal)
 
     def estimate(self) -> Gaussian:
-        """The newest-state marginal, computed once per belief (beliefs are immutable)."""
-        if self._estimate is None or self._estimate[0] is not self.belief:
-            self._estimate = (self.belief, self.belief.current())
-        return self._estimate[1]
+        """The newest-state marginal (computed once per belief: :meth:`Trajectory.state`)."""
+        return self.belief.current()
 
 
 class Tracker:
@@ -116,6 +113,7 @@ class Tracker:
         self.tracks: dict[int, Track] = {}
         self.labels: dict[tuple[str, int], int] = {}  # (peer, remote track id) -> local track id
         self._next_id = 0
+        self._models: dict[int, tuple[Bearing, Bearing3D]] = {}  # id(bearing) -> its model, for one update
 
     # -- time -----------------------------------------------------------------------------------
     def advance(self, epoch: int) -> None:
@@ -145,6 +143,7 @@ class Tracker:
     def update(self, bearings: list[Bearing], by_label: bool = False) -> dict[str, int]:
         """Associate and apply this step's bearings. Returns counts of what happened to them."""
         counts = {"updated": 0, "initiated": 0, "unused": 0} | ({} if self.initiator is None else {"candidate": 0})
+        self._models = {}
         if by_label:
             pairs = self._pairs_by_label(bearings)
         else:
@@ -206,12 +205,20 @@ class Tracker:
                     continue
         return False
 
+    def _model(self, bearing: Bearing) -> Bearing3D:
+        """The bearing's measurement model (Merino (3.52)), built and its ``R`` checked once per update call:
+        association compares it with every track, then the update applies it."""
+        known = self._models.get(id(bearing))
+        if known is None or known[0] is not bearing:
+            known = self._models[id(bearing)] = (bearing, Bearing3D(STATE_DIM, bearing.sensor, bearing.R))
+        return known[1]
+
     def _measure(self, belief: Trajectory, bearing: Bearing) -> Trajectory | None:
         """Apply one detection to a belief, as a bearing or as a geolocated position (``None``: the ray
         misses the terrain, so a position cannot be formed)."""
         offset = self._offset(bearing)
         if self.config.measurement == "bearing":
-            return belief.eif_update(Bearing3D(STATE_DIM, bearing.sensor, bearing.R), bearing.azel, offset)
+            return belief.eif_update(self._model(bearing), bearing.azel, offset)
         located = self._geolocate(bearing)
         if located is None:
             return None
@@ -232,7 +239,7 @@ class Tracker:
         """Merino (3.64) against the track's state at the bearing's time (a peer's bearing may be older)."""
         offset = self._offset(bearing)
         est = track.estimate() if offset == 0 else track.belief.state(offset)
-        model = Bearing3D(STATE_DIM, bearing.sensor, bearing.R)
+        model = self._model(bearing)
         H = model.jacobian(est.mean)
         nu = model.residual(bearing.azel, model.h(est.mean))
         S = H @ est.cov @ H.T + bearing.R
