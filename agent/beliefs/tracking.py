@@ -195,14 +195,25 @@ class Tracker:
     def _duplicate(self, track: Track) -> bool:
         """Does a track that has just been confirmed pass the track-to-track gate with another confirmed
         track? Then it is that target seen twice (started by a run of its detections that fell outside its
-        gate) and is dropped rather than merged: a merge would desynchronize the other's channel filters."""
-        for other in self.tracks.values():
-            if other.id != track.id and other.confirmed:
-                try:
-                    if self._track_distance(other.estimate(), track.estimate()) < self.config.track_gate:
-                        return True
-                except UninformativeBeliefError:
-                    continue
+        gate) and is dropped rather than merged: a merge would desynchronize the other's channel filters.
+
+        Unless the other is *lost*: nobody has measured it since this one started — it coasted through a
+        manoeuvre its motion model does not cover, and the target's detections now fall outside its gate
+        (which is why this one started). Then this one continues it and the lost one is deleted: keeping
+        the lost one would report an estimate tens of metres off, under a covariance broad enough to be
+        matched, until it went stale."""
+        started = track.created_epoch * self.model.step
+        for other in list(self.tracks.values()):
+            if other.id == track.id or not other.confirmed:
+                continue
+            try:
+                same = self._track_distance(other.estimate(), track.estimate()) < self.config.track_gate
+            except UninformativeBeliefError:
+                continue
+            if same and other.last_measured < started:
+                self._delete(other.id)
+            elif same:
+                return True
         return False
 
     def _model(self, bearing: Bearing) -> Bearing3D:
