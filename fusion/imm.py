@@ -17,12 +17,12 @@ given the mode they are independent, so this is the exact mode posterior.
 
 A mixture is not a Gaussian in information form: two IMM beliefs cannot be fused by adding information, so
 channel filters cannot remove common information from them exactly. The IMM therefore serves the
-centralized oracle, which fuses nothing (see ``mesh_sim.imm_oracle``).
+centralized oracle and agents under ``flood``, which fuse no beliefs (see ``fusion.imm_window``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -36,6 +36,7 @@ class ImmModel:
 
     motions: tuple
     switch: np.ndarray
+    _terms: dict = field(default_factory=dict, init=False, repr=False, compare=False)  # dt -> terms(dt)
 
     def __post_init__(self):
         r = len(self.motions)
@@ -52,6 +53,14 @@ class ImmModel:
     @property
     def dim(self) -> int:
         return self.motions[0].dim
+
+    def terms(self, dt: float) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+        """``(F_j, Q_j)`` of every mode over ``dt`` seconds, computed once per ``dt`` (a tracker predicts on one
+        grid step)."""
+        known = self._terms.get(dt)
+        if known is None:
+            known = self._terms[dt] = tuple((m.transition(dt), m.noise(dt)) for m in self.motions)
+        return known
 
     @classmethod
     def two_modes(cls, quiet, manoeuvre, stay: float) -> ImmModel:
@@ -85,32 +94,31 @@ class ImmBelief:
         c = self.probs @ model.switch  # c_j = sum_i p_ij mu_i
         weights = model.switch * self.probs[:, None] / np.where(c > 0, c, 1.0)[None, :]  # mu_i|j in column j
         means, covs = [], []
-        for j, motion in enumerate(model.motions):
+        for j, (F, Q) in enumerate(model.terms(dt)):
             x0, P0 = _moments(self.means, self.covs, weights[:, j])
-            F = motion.transition(dt)
             means.append(F @ x0)
-            covs.append(_symmetric(F @ P0 @ F.T + motion.noise(dt)))
+            covs.append(_symmetric(F @ P0 @ F.T + Q))
         return ImmBelief(np.array(means), np.array(covs), c)
 
     def update(self, measurement, z) -> ImmBelief:
         """EKF update of every mode with one measurement (a ``fusion.measurement`` model with ``R``), and the
         mode probabilities by their innovation likelihoods (step 3 above)."""
         z = np.asarray(z, float)
-        means, covs, log_like = [], [], []
-        for x, P in zip(self.means, self.covs, strict=True):
-            z_hat, H = measurement.linearize(x)
-            nu = measurement.residual(z, z_hat)
-            S = _symmetric(H @ P @ H.T + measurement.R)
-            PHt = P @ H.T
-            K = np.linalg.solve(S, PHt.T).T
-            means.append(x + K @ nu)
-            A = np.eye(x.size) - K @ H
-            covs.append(_symmetric(A @ P @ A.T + K @ measurement.R @ K.T))  # Joseph form
-            _, logdet = np.linalg.slogdet(2.0 * np.pi * S)
-            log_like.append(-0.5 * (float(nu @ np.linalg.solve(S, nu)) + logdet))
-        log_post = np.log(np.maximum(self.probs, 1e-300)) + np.array(log_like)
+        R = measurement.R
+        terms = [measurement.linearize(x) for x in self.means]  # (z_hat_j, H_j): the geometry of each mode
+        H = np.array([h for _, h in terms])  # (r, m, n); every mode at once below
+        nu = np.array([measurement.residual(z, z_hat) for z_hat, _ in terms])  # (r, m)
+        PHt = self.covs @ H.transpose(0, 2, 1)  # (r, n, m)
+        S = _symmetric(H @ PHt + R)
+        K = np.linalg.solve(S, PHt.transpose(0, 2, 1)).transpose(0, 2, 1)  # K_j = P_j H_j^T S_j^-1
+        means = self.means + np.einsum("rnm,rm->rn", K, nu)
+        A = np.eye(self.means.shape[1]) - K @ H
+        covs = _symmetric(A @ self.covs @ A.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1))  # Joseph form
+        _, logdet = np.linalg.slogdet(2.0 * np.pi * S)
+        mahalanobis = np.einsum("rm,rm->r", nu, np.linalg.solve(S, nu[:, :, None])[:, :, 0])
+        log_post = np.log(np.maximum(self.probs, 1e-300)) - 0.5 * (mahalanobis + logdet)
         probs = np.exp(log_post - log_post.max())
-        return ImmBelief(np.array(means), np.array(covs), probs / probs.sum())
+        return ImmBelief(means, covs, probs / probs.sum())
 
     def combined(self) -> Gaussian:
         """The mixture's moment-matched Gaussian (step 4 above)."""
@@ -126,4 +134,5 @@ def _moments(means: np.ndarray, covs: np.ndarray, weights: np.ndarray) -> tuple[
 
 
 def _symmetric(a: np.ndarray) -> np.ndarray:
-    return 0.5 * (a + a.T)
+    """``(a + a^T) / 2`` of a matrix, or of each matrix of a stack."""
+    return 0.5 * (a + np.swapaxes(a, -1, -2))

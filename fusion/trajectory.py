@@ -109,6 +109,11 @@ class Trajectory:
         Y = validation.as_psd(Y, "trajectory information matrix", model.dim)
         return cls(y, Y, int(epoch), model)
 
+    @property
+    def oldest(self) -> int:
+        """The oldest epoch of the window (a measurement may be applied at any epoch ``oldest .. epoch``)."""
+        return self.epoch - self.model.window + 1
+
     # -- time ------------------------------------------------------------------------------------
     def advanced_to(self, epoch: int) -> Trajectory:
         """Append states up to grid index ``epoch``, marginalising the oldest ones (Merino (3.27), (3.31)-(3.32))."""

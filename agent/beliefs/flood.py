@@ -3,7 +3,8 @@
 Each agent floods its own detections — the independent information increments of the fleet — through
 :class:`agent.net.flood_relay.FloodRelay`: tagged ``(origin, n)``, relayed once per neighbour that lacks
 them, acknowledged and de-duplicated, so every agent applies every detection it receives exactly once, at
-the time it was taken (a trajectory window takes a late one, Merino (3.29)-(3.30)). Every agent then runs
+the time it was taken (a trajectory window takes a late one, Merino (3.29)-(3.30); with ``motion = "imm"`` an
+IMM window re-filters, :mod:`fusion.imm_window`). Every agent then runs
 the same tracker on the fleet's detections — association (Merino (3.64)), initiation, extended
 information updates (3.52) — as the centralized filter does, and no belief is ever exchanged, so nothing
 can be counted twice on any graph, with loops, loss or changing links. Its cost grows with the fleet:

@@ -6,7 +6,10 @@ model is ``DampedVelocity`` (integrated Ornstein–Uhlenbeck velocity): its stat
 is part of every node's prior, so no node adds a velocity prior of its own. With the constant-velocity
 model (Merino (3.58)-(3.59)) a new track needs a velocity pseudo-prior, which two agents initiating the
 same target both bring (after exact fusion that weak prior counts twice: a small, documented
-overconfidence in early velocity).
+overconfidence in early velocity). Under ``policy = "flood"``, where no belief is ever fused, ``motion =
+"imm"`` makes each track an interacting multiple model instead (a quiet and a manoeuvring mode,
+``[tracking.imm]``) on a window that takes late bearings by reprocessing (:mod:`fusion.imm_window`): the model
+the centralized reference uses, matched to static, constant-velocity and manoeuvring targets alike.
 
 Measurements are used either as bearings (extended information update, Merino (3.52)) or, with
 ``measurement = "position"``, as geolocated positions: the ray cast onto the terrain with an
@@ -54,6 +57,7 @@ from agent.beliefs.tracking_config import TrackerConfig
 from agent.sensors.bearing import Bearing
 from fusion.channel_filter import ChannelFilter, Received
 from fusion.gaussian import Gaussian, UninformativeBeliefError
+from fusion.imm_window import ImmWindow, ImmWindowModel
 from fusion.measurement import Bearing3D, PositionMeasurement
 from fusion.motion import ConstantVelocity, DampedVelocity
 from fusion.resync import Edge
@@ -81,7 +85,7 @@ class RemoteTrack:
 @dataclass
 class Track:
     id: int
-    belief: Trajectory
+    belief: Trajectory | ImmWindow  # ImmWindow: motion = "imm", under flood only
     channels: ChannelFilter | None  # per-peer channel filters (None: the flood policy shares no beliefs)
     created_epoch: int
     hits: int = 1
@@ -104,11 +108,12 @@ class Tracker:
         self.me = me  # the agent's name: turns on channel re-synchronisation (fusion.resync)
         self.initiator = ParticleInitiator(config.particle_init, seed) if config.initiation == "particles" else None
         self.terrain = terrain
-        if config.motion == "damped":
-            motion = DampedVelocity(3, config.speed_std, config.tau, config.vertical_speed_std)
+        if config.motion == "imm":
+            self.model = ImmWindowModel(config.imm.model(), step, config.window)
         else:
-            motion = ConstantVelocity(3, config.q, config.vertical_q)
-        self.model = TrajectoryModel(motion, step, config.window)
+            motion = (DampedVelocity(3, config.speed_std, config.tau, config.vertical_speed_std)
+                      if config.motion == "damped" else ConstantVelocity(3, config.q, config.vertical_q))
+            self.model = TrajectoryModel(motion, step, config.window)
         self.epoch = 0
         self.tracks: dict[int, Track] = {}
         self.labels: dict[tuple[str, int], int] = {}  # (peer, remote track id) -> local track id
@@ -152,8 +157,10 @@ class Tracker:
         for b_index, track_id in pairs:
             track = self.tracks[track_id]
             bearing = bearings[b_index]
+            used.add(b_index)
             updated = self._measure(track.belief, bearing)
             if updated is None:
+                counts["unused"] += 1
                 continue
             track.belief = updated
             track.hits += 1
@@ -162,7 +169,6 @@ class Tracker:
                 track.confirmed = True
                 if not by_label and self._duplicate(track):
                     self._delete(track.id)
-            used.add(b_index)
             counts["updated"] += 1
         for b_index, bearing in enumerate(bearings):
             if b_index in used:
@@ -224,10 +230,13 @@ class Tracker:
             known = self._models[id(bearing)] = (bearing, Bearing3D(STATE_DIM, bearing.sensor, bearing.R))
         return known[1]
 
-    def _measure(self, belief: Trajectory, bearing: Bearing) -> Trajectory | None:
+    def _measure(self, belief, bearing: Bearing):
         """Apply one detection to a belief, as a bearing or as a geolocated position (``None``: the ray
-        misses the terrain, so a position cannot be formed)."""
+        misses the terrain, so a position cannot be formed, or the detection is older than the belief's
+        window — an IMM track younger than the detection)."""
         offset = self._offset(bearing)
+        if belief.epoch - offset < belief.oldest:
+            return None
         if self.config.measurement == "bearing":
             return belief.eif_update(self._model(bearing), bearing.azel, offset)
         located = self._geolocate(bearing)
@@ -251,8 +260,8 @@ class Tracker:
         offset = self._offset(bearing)
         est = track.estimate() if offset == 0 else track.belief.state(offset)
         model = self._model(bearing)
-        H = model.jacobian(est.mean)
-        nu = model.residual(bearing.azel, model.h(est.mean))
+        z_hat, H = model.linearize(est.mean)
+        nu = model.residual(bearing.azel, z_hat)
         S = H @ est.cov @ H.T + bearing.R
         return float(nu @ np.linalg.solve(S, nu))
 
@@ -299,11 +308,17 @@ class Tracker:
     def _start_track(self, position, cov, offset: int, truth_id, last_measured: float) -> Track:
         """A tentative track whose first information is a position measurement ``N(position, cov)``."""
         c = self.config
-        belief = Trajectory.prior(self.model, self.epoch)
-        where = PositionMeasurement(STATE_DIM, cov)
-        belief = belief.update(where.H, where.R_inv, position, offset)
+        speed_cov = np.diag([c.speed_std**2, c.speed_std**2, c.vertical_speed_std**2])
+        if c.motion == "imm":  # the position and a velocity prior, in every mode
+            start = np.zeros((STATE_DIM, STATE_DIM))
+            start[:3, :3], start[3:, 3:] = cov, speed_cov
+            belief = ImmWindow.start(self.model, self.epoch - offset, np.concatenate([position, np.zeros(3)]), start,
+                                     c.imm.start_probs()).advanced_to(self.epoch)
+        else:
+            belief = Trajectory.prior(self.model, self.epoch)
+            where = PositionMeasurement(STATE_DIM, cov)
+            belief = belief.update(where.H, where.R_inv, position, offset)
         if c.motion == "constant_velocity":  # no stationary velocity in the prior: add a local pseudo-prior
-            speed_cov = np.diag([c.speed_std**2, c.speed_std**2, c.vertical_speed_std**2])
             H_v = np.hstack([np.zeros((3, 3)), np.eye(3)])
             belief = belief.update(H_v, np.linalg.inv(speed_cov), np.zeros(3), offset)
         track = self._new_track(belief)

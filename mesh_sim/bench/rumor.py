@@ -47,6 +47,7 @@ METHODS: dict[str, dict] = {
     "fast_ci": {"tracking": {"policy": "ci", "intersection": "fast_ci"}},
     "ici": {"tracking": {"policy": "ci", "intersection": "ici"}},
     "flood": {"tracking": {"policy": "flood"}},
+    "flood_imm": {"tracking": {"policy": "flood", "motion": "imm"}},
     "hybrid": {"tracking": {"policy": "hybrid"}},
 }
 TOPOLOGIES = ("tree", "full", "ring")

@@ -43,14 +43,14 @@ def neighbours(name: str) -> list[str]:
     return sorted({b for a, b in EDGES if a == name} | {a for a, b in EDGES if b == name})
 
 
-def settings(measurement: str) -> dict:
+def settings(measurement: str, motion: str) -> dict:
     """A wide association gate: a detection gated out at initiation would start a second track whose
     information is lost when it is dropped — a tracker decision that depends on arrival order, not fusion."""
-    return {"measurement": measurement, "gate": 30.0}
+    return {"measurement": measurement, "motion": motion, "gate": 30.0, "policy": "flood"}
 
 
-def fleet(measurement: str) -> dict[str, FloodExchange]:
-    config = TrackerConfig(policy="flood", **settings(measurement))
+def fleet(measurement: str, motion: str) -> dict[str, FloodExchange]:
+    config = TrackerConfig(**settings(measurement, motion))
     out = {}
     for name in NAMES:
         topology = Topology(name)
@@ -68,8 +68,9 @@ def envelope(name: str, seq: int, t: float, payload: dict) -> wire.Envelope:
     return wire.decode(data, expected_origin=name, kinds={"track"})
 
 
-def run(measurement: str, steps: int = 12, settle: int = 4):
-    agents, central = fleet(measurement), Tracker(TrackerConfig(**settings(measurement)), STEP, GROUND)
+def run(measurement: str, motion: str, steps: int = 12, settle: int = 4):
+    agents = fleet(measurement, motion)
+    central = Tracker(TrackerConfig(**settings(measurement, motion)), STEP, GROUND)
     sensors = {n: GeometricBearingSensor(BearingSensorConfig(p_detect=1.0, false_alarms=0.0), i)
                for i, n in enumerate(NAMES)}
     inbox: dict[str, list] = {n: [] for n in NAMES}
@@ -100,9 +101,12 @@ def by_position(tracker: Tracker) -> list:
     return sorted((est for _, est in tracker.estimates()), key=lambda est: est.mean[0])
 
 
-@pytest.mark.parametrize("measurement", ["position", "bearing"])
-def test_on_a_graph_with_loops_every_agent_equals_the_centralized_tracker(measurement):
-    agents, central = run(measurement)
+@pytest.mark.parametrize(("measurement", "motion"), [("position", "damped"), ("bearing", "damped"),
+                                                     ("bearing", "imm")])
+def test_on_a_graph_with_loops_every_agent_equals_the_centralized_tracker(measurement, motion):
+    """With ``motion = "imm"`` each track is an interacting multiple model whose late detections are
+    reprocessed (fusion.imm_window): the same equality holds."""
+    agents, central = run(measurement, motion)
     expected = by_position(central)
     assert len(expected) == 2
     for name, ex in agents.items():
@@ -114,7 +118,10 @@ def test_on_a_graph_with_loops_every_agent_equals_the_centralized_tracker(measur
                 np.testing.assert_allclose(g.Y, e.Y, rtol=1e-9, atol=1e-9 * np.abs(e.Y).max(), err_msg=name)
             else:  # bearings are linearised where each tracker stands when it applies them (order of arrival)
                 d = g.mean - e.mean
-                assert d @ e.Y @ d < 0.05**2, (name, d)  # within 5 % of a standard deviation
+                # within 5 % of a standard deviation; an IMM's mode probabilities carry the order further: 15 %
+                # (measured 9 % at most)
+                tolerance = 0.15 if motion == "imm" else 0.05
+                assert d @ e.Y @ d < tolerance**2, (name, d)
                 np.testing.assert_allclose(g.Y, e.Y, rtol=0.05, atol=0.05 * np.abs(e.Y).max(), err_msg=name)
         metrics = ex.metrics()["flood"]
         assert metrics["too_old"] == 0 and metrics["originated"] == 12
@@ -135,7 +142,7 @@ BAD_PAYLOADS = {
 
 @pytest.mark.parametrize("fault", sorted(BAD_PAYLOADS))
 def test_a_malformed_flood_message_is_refused_and_changes_nothing(fault):
-    agents, _ = run("position", steps=4, settle=0)
+    agents, _ = run("position", "damped", steps=4, settle=0)
     ex = agents["a"]
     before = (ex.relay.acks(), ex.relay.metrics(), [(i, e.mean.copy()) for i, e in ex.tracker.estimates()])
     with pytest.raises(wire.DecodeError) as err:
@@ -147,7 +154,7 @@ def test_a_malformed_flood_message_is_refused_and_changes_nothing(fault):
 
 
 def test_detections_from_far_in_the_future_are_refused_as_a_clock_fault():
-    agents, _ = run("position", steps=2, settle=0)
+    agents, _ = run("position", "damped", steps=2, settle=0)
     rows = np.array([[1e6, 0, 0, -80, 0, -1.0, 1e-4, 0, 1e-4]])
     with pytest.raises(wire.DecodeError) as err:
         agents["a"].receive("b", 99, 0.4, {"increments": [["b", 7, rows]], "acks": {}}, False, 0.4)
