@@ -25,9 +25,9 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from dataclasses import replace
+
+import numpy as np
 
 from agent.beliefs.tracking import Tracker
 from agent.beliefs.tracks import FUTURE_EPOCHS
