@@ -28,6 +28,7 @@ import numpy as np
 from fusion import validation
 from fusion.gaussian import Gaussian
 from fusion.imm import ImmBelief, ImmModel
+from fusion.trajectory import grid_epoch
 
 
 @dataclass(frozen=True)
@@ -49,8 +50,7 @@ class ImmWindowModel:
         return self.imm.dim
 
     def epoch_of(self, t: float) -> int:
-        """The grid index of the newest grid time not after ``t``."""
-        return int(np.floor(t / self.step + 1e-9))
+        return grid_epoch(t, self.step)
 
 
 class ImmWindow:

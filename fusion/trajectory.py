@@ -35,6 +35,11 @@ from fusion.inverse_covariance_intersection import ici
 from fusion.pair_weights import ici_weight
 
 
+def grid_epoch(t: float, step: float) -> int:
+    """The index of the newest time ``k * step`` not after ``t`` (1e-9 steps of slack for float rounding)."""
+    return int(np.floor(t / step + 1e-9))
+
+
 @dataclass(frozen=True)
 class TrajectoryModel:
     """The grid (``step`` seconds), the window length and the motion model shared by a fleet."""
@@ -75,8 +80,7 @@ class TrajectoryModel:
         return self.state_dim * self.window
 
     def epoch_of(self, t: float) -> int:
-        """The grid index of the newest grid time not after ``t``."""
-        return int(np.floor(t / self.step + 1e-9))
+        return grid_epoch(t, self.step)
 
 
 class Trajectory:
