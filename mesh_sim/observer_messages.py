@@ -9,12 +9,12 @@ import re
 
 import numpy as np
 
-from agent.net import wire
+from agent.net import schemas, wire
 
 SYM_RTOL = 1e-6  # position covariance symmetry tolerance, relative to its largest entry
 PSD_RTOL = 1e-9  # smallest eigenvalue allowed, relative to the largest (negatives are clipped to 0)
 
-_AGENT_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")  # as agent.net.wire
+_AGENT_ID = re.compile(schemas.AGENT_ID_PATTERN)
 
 
 def _vector(value, n: int | None, name: str) -> np.ndarray:

@@ -85,24 +85,23 @@ class FloodExchange(TrackExchange):
             self.tracker.update(usable)
 
     def _decode(self, payload: dict) -> tuple[list, dict[str, Held]]:
-        """Everything checked before anything is applied: a bad message changes nothing."""
+        """Everything checked before anything is applied: a bad message changes nothing. The wire's schema
+        (:class:`agent.net.schemas.TrackPayload`) has fixed the types; here the fields of this policy must be
+        there, the acknowledgement masks in range and the bearings well formed."""
         increments, acks = payload.get("increments"), payload.get("acks")
-        if not isinstance(increments, list) or not isinstance(acks, dict):
+        if increments is None or acks is None:
             raise wire.DecodeError("bad_field", "a flood message needs an increments list and an acks map")
         try:
-            held = {str(o): Held.from_wire(entry) for o, entry in acks.items()}
+            held = {origin: Held.from_wire(entry) for origin, entry in acks.items()}
         except ValueError as err:
             raise wire.DecodeError("bad_field", f"acks: {err}") from None
         out = []
         newest = (self.tracker.epoch + FUTURE_EPOCHS) * self.tracker.model.step
-        for entry in increments:
-            if not (isinstance(entry, list) and len(entry) == 3 and isinstance(entry[0], str) and entry[0]
-                    and wire.is_int(entry[1]) and entry[1] >= 0):
-                raise wire.DecodeError("bad_field", "an increment is [origin, number >= 0, bearings]")
-            bearings = decode_bearings(entry[2])
+        for origin, n, rows in increments:
+            bearings = decode_bearings(rows)
             if max(b.t for b in bearings) > newest:
                 raise wire.DecodeError("future_epoch", f"detections more than {FUTURE_EPOCHS} steps ahead of ours")
-            out.append((entry[0], int(entry[1]), entry[2], bearings))
+            out.append((origin, n, rows, bearings))
         return out, held
 
     def metrics(self) -> dict:

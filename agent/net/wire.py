@@ -1,8 +1,8 @@
-"""The msgpack wire format (DESIGN.md §5): envelope, arrays and strict validation.
+"""The wire format (DESIGN.md §5, written out in ``docs/wire.md``): envelope, arrays, typed validation.
 
-One job: bytes <-> validated Python objects. No Zenoh, no clocks, no beliefs state here.
+One job: bytes <-> validated Python objects. No Zenoh, no clocks, no belief state here.
 
-Envelope — a msgpack map with short keys (bandwidth is a first-class metric)::
+Envelope — a MessagePack map with short keys (bandwidth is a first-class metric)::
 
     "v"   version  int, must equal SCHEMA_VERSION
     "k"   kind     str, one of KINDS (or of the ``kinds`` passed to encode/decode)
@@ -10,21 +10,22 @@ Envelope — a msgpack map with short keys (bandwidth is a first-class metric)::
     "s"   seq      int in [0, 2**64)
     "t"   stamp    float seconds, finite
     "a"   acks     map agent id -> last seq received from that peer (at most MAX_ACKS entries)
-    "p"   payload  map with str keys (the kind's codec defines its content)
+    "p"   payload  map with str keys, typed per kind by :mod:`agent.net.schemas`
     "mac"          optional, 32 bytes: HMAC-SHA256 with the fleet key, always the *last* entry
 
 The MAC covers every byte of the message before the 32 MAC bytes (map header, all fields, the "mac"
 key and the bin header), so the receiver checks the exact bytes it received, never a re-encoding.
 
-Payload codecs live beside this module: :mod:`agent.net.gaussian_codec` (Gaussian and trajectory
-beliefs), :mod:`agent.net.grid_codec`, :mod:`agent.net.particle_wire` and :mod:`agent.net.fire_truth`.
-
-Arrays travel as msgpack ExtType ``EXT_NDARRAY`` whose data is::
+Arrays travel as MessagePack ExtType ``EXT_NDARRAY`` whose data is::
 
     dtype (3 ASCII bytes, one of ALLOWED_DTYPES) | ndim (u8, <= MAX_NDIM) | ndim x u32 LE dims | raw LE bytes
 
-The decoder checks the declared shape against the byte count and MAX_ARRAY_ELEMENTS *before* it
-creates the array, and returns a writable copy (never a view of the received buffer).
+Decoding is done in C by msgspec against typed schemas: the envelope is the :class:`_Body` struct (every
+header field's type and range declared), the payload is decoded by its kind's schema
+(:data:`agent.net.schemas.PAYLOADS`), so no Python code walks the elements of a message. An array is
+checked once, as a whole, when msgspec meets it: the declared shape against the byte count and
+MAX_ARRAY_ELEMENTS *before* it is created; the result is a writable copy, never a view of the received
+buffer. Values (finiteness, definiteness) are checked vectorised by the payload's codec.
 
 Every defect found in received bytes raises :class:`DecodeError` with ``reason`` in REASONS, and
 :func:`decode` raises nothing else whatever the input.
@@ -35,26 +36,29 @@ from __future__ import annotations
 import hashlib
 import hmac
 import math
-import re
 import struct
 from collections.abc import Set
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any
 
 import msgpack
+import msgspec
 import numpy as np
+
+from agent.net import schemas
 
 SCHEMA_VERSION = 1
 
-#: Message kinds this module knows. Another module extends the set without touching this one:
-#: ``decode(data, kinds=wire.KINDS | {"particles"})``.
-KINDS: frozenset[str] = frozenset({"track", "telemetry", "measurement", "truth", "clock", "grid", "grid_evidence"})
+#: Message kinds this module knows (those with a schema). Another module extends the set without touching
+#: this one: ``decode(data, kinds=wire.KINDS | {"particles"})`` (a kind without a schema decodes as a
+#: str-keyed map of plain values and arrays, which its codec validates).
+KINDS: frozenset[str] = frozenset(schemas.PAYLOADS)
 
 REASONS: frozenset[str] = frozenset(
     {
         "oversize",  # message, container, array or ack table larger than the limits
-        "truncated",  # msgpack input ends early
-        "malformed",  # not msgpack, trailing bytes, or nesting deeper than MAX_DEPTH
+        "truncated",  # MessagePack input ends early
+        "malformed",  # not MessagePack, trailing bytes, or nesting deeper than the decoder allows
         "bad_type",  # a value of the wrong type (incl. disallowed array dtype, unknown ext type)
         "bad_field",  # a field missing or unknown, or an out-of-range value (agent id, negative seq)
         "version",  # schema version other than SCHEMA_VERSION
@@ -81,23 +85,18 @@ REASONS: frozenset[str] = frozenset(
     }
 )
 
-# Limits (all chosen here). MAX_CONTAINER_LEN bounds msgpack's pre-allocation per array header, so a
-# hostile message of nested headers costs at most ~30 MB transiently before it is rejected.
+# Limits (all chosen here).
 MAX_MESSAGE_BYTES = 1 << 20
 MAX_ACKS = 256
 MAX_ARRAY_ELEMENTS = 1 << 20
 MAX_NDIM = 8
-MAX_DEPTH = 32  # nesting of lists/maps inside the payload
-MAX_CONTAINER_LEN = 4096  # msgpack array length
-MAX_MAP_LEN = 1024
 EXT_NDARRAY = 1
 ALLOWED_DTYPES: frozenset[str] = frozenset({"<f8", "<f4", "<i4", "<i8", "|u1", "<u2"})
 MAC_BYTES = 32
-
-_AGENT_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
-_FIELDS = {"v": "version", "k": "kind", "o": "origin", "s": "seq", "t": "stamp", "a": "acks", "p": "payload"}
-_SEQ_LIMIT = 1 << 64
+MAX_DEPTH = 32  # nesting of lists/maps inside a generic payload (the typed schemas fix their own)
 _HEADER = ("k", "o", "s", "t")  # kind, origin, seq, stamp: packed before the acks and the payload
+#: The bytes before the MAC in a signed message: the key "mac" (fixstr 3) and a bin 8 header of 32 bytes.
+_MAC_TAIL = b"\xa3mac\xc4\x20"
 
 
 class DecodeError(ValueError):
@@ -114,7 +113,8 @@ class DecodeError(ValueError):
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Envelope:
     """One message. ``payload`` values may be None, bool, int, float, str, bytes, numpy arrays, lists
-    and str-keyed dicts of those. (``eq=False``: payloads hold arrays, compare fields explicitly.)"""
+    (tuples where the schema fixes a length) and str-keyed dicts of those. (``eq=False``: payloads hold
+    arrays, compare fields explicitly.)"""
 
     version: int = SCHEMA_VERSION
     kind: str
@@ -125,13 +125,32 @@ class Envelope:
     payload: dict[str, Any] = field(default_factory=dict)
 
 
+class _Body(msgspec.Struct, forbid_unknown_fields=True):
+    """The envelope as msgspec validates it (field names are the wire's keys)."""
+
+    v: int
+    k: str
+    o: schemas.AgentId
+    s: schemas.Seq
+    t: float
+    a: Annotated[dict[schemas.AgentId, schemas.Seq], msgspec.Meta(max_length=MAX_ACKS)]
+    p: msgspec.Raw
+    mac: Any = None  # judged by decode: 32 bytes
+
+
+class _Version(msgspec.Struct):
+    """Only the version (the first thing judged: another version may have other fields)."""
+
+    v: Any = msgspec.UNSET
+
+
 # -- envelope ----------------------------------------------------------------------------------------
 def encode(envelope: Envelope, key: bytes | None = None, *, kinds: Set[str] | None = None) -> bytes:
     """Pack an envelope, appending an HMAC-SHA256 over the packed bytes when a fleet ``key`` is given.
 
     The header is checked with the receiver's rules (``ValueError`` if it would be rejected) and the
-    packer refuses types that have no wire form (``TypeError``, e.g. a bool array). Payload limits
-    (MAX_DEPTH, MAX_CONTAINER_LEN, MAX_MAP_LEN, MAX_MESSAGE_BYTES) are enforced by the receiver only."""
+    packer refuses types that have no wire form (``TypeError``, e.g. a bool array). Payload limits are
+    enforced by the receiver only."""
     body = {
         "v": _plain(envelope.version),
         "k": envelope.kind,
@@ -141,14 +160,11 @@ def encode(envelope: Envelope, key: bytes | None = None, *, kinds: Set[str] | No
         "a": {peer: _plain(last) for peer, last in envelope.acks.items()},
         "p": envelope.payload,
     }
-    try:
-        _check_header(body, KINDS if kinds is None else kinds)
-    except DecodeError as exc:
-        raise ValueError(f"cannot encode envelope: {exc}") from None
+    _check_outgoing_header(body, KINDS if kinds is None else kinds)
     if key is not None:
         _check_key(key)
         body["mac"] = bytes(MAC_BYTES)  # placeholder: the MAC is the last MAC_BYTES bytes of the message
-    packed = msgpack.packb(body, default=_pack_default, use_bin_type=True, use_single_float=False)
+    packed = _ENCODER.encode(body)
     if key is not None:
         packed = packed[:-MAC_BYTES] + _mac(key, packed[:-MAC_BYTES])
     return packed
@@ -164,9 +180,10 @@ def decode(
 ) -> Envelope:
     """Validate and unpack one message. Raises only :class:`DecodeError`, whatever ``data`` holds.
 
-    Order of checks: size, msgpack structure, MAC (with a key, before any field is interpreted),
-    version, field set, field types and ranges, kind, origin, payload tree. (A ``key`` that is not
-    non-empty bytes is a configuration error and raises ``ValueError`` before ``data`` is looked at.)"""
+    Order of checks: size, MAC (with a key, on the raw bytes before anything is parsed), envelope
+    structure, version, field set, field types and ranges, kind, origin, payload schema. (A ``key`` that
+    is not non-empty bytes is a configuration error and raises ``ValueError`` before ``data`` is looked
+    at.)"""
     if key is not None:
         _check_key(key)
     try:
@@ -188,27 +205,83 @@ def _decode(data, expected_origin, key, max_bytes, kinds) -> Envelope:
     data = bytes(data)
     if len(data) > max_bytes:
         raise DecodeError("oversize", f"{len(data)} bytes > {max_bytes}")
-    obj = _unpack(data, max_bytes)
-    if not isinstance(obj, dict):
-        raise DecodeError("bad_type", f"envelope must be a map, got {type(obj).__name__}")
     if key is not None:
-        _verify_mac(obj, data, key)
-    elif "mac" in obj and not (isinstance(obj["mac"], bytes) and len(obj["mac"]) == MAC_BYTES):
+        _verify_mac(data, key)
+    body = _parse(_BODY, data, envelope=True)
+    if key is None and body.mac is not None and not (isinstance(body.mac, bytes) and len(body.mac) == MAC_BYTES):
         raise DecodeError("bad_mac", "mac field is not 32 bytes")
-    obj.pop("mac", None)
-    _check_header(obj, kinds)
-    if expected_origin is not None and obj["o"] != expected_origin:
-        raise DecodeError("origin_mismatch", f"origin {obj['o']!r} on a key of {expected_origin!r}")
-    _check_payload(obj["p"])
-    return Envelope(
-        version=obj["v"],
-        kind=obj["k"],
-        origin=obj["o"],
-        seq=obj["s"],
-        stamp=float(obj["t"]),
-        acks=obj["a"],
-        payload=obj["p"],
-    )
+    if body.v != SCHEMA_VERSION:
+        raise DecodeError("version", f"schema version {body.v}, expected {SCHEMA_VERSION}")
+    if not math.isfinite(body.t):
+        raise DecodeError("non_finite", "stamp is not finite")
+    if body.k not in kinds:
+        raise DecodeError("unknown_kind", f"kind {body.k[:80]!r}")
+    if expected_origin is not None and body.o != expected_origin:
+        raise DecodeError("origin_mismatch", f"origin {body.o!r} on a key of {expected_origin!r}")
+    schema = _PAYLOADS.get(body.k)
+    if schema is None:
+        payload = _parse(_GENERIC, body.p)
+        _check_tree(payload)
+    else:
+        payload = _parse(schema[0], body.p, reason=schema[1])
+    return Envelope(version=body.v, kind=body.k, origin=body.o, seq=body.s, stamp=body.t, acks=body.a, payload=payload)
+
+
+def _parse(decoder: msgspec.msgpack.Decoder, data, *, envelope: bool = False, reason: str | None = None):
+    """Run a msgspec decoder, turning its errors into :class:`DecodeError` reasons. ``envelope``: judge a
+    failed envelope by its version first; ``reason``: the kind's own reason for a payload schema violation
+    (e.g. ``bad_truth``)."""
+    try:
+        return decoder.decode(data)
+    except DecodeError:
+        raise
+    except msgspec.ValidationError as exc:
+        if envelope:
+            _check_version(data)
+        raise DecodeError(reason or _validation_reason(str(exc)), str(exc)) from None
+    except msgspec.DecodeError as exc:
+        text = str(exc)
+        raise DecodeError("truncated" if "truncated" in text else "malformed", text) from None
+    except UnicodeDecodeError:
+        raise DecodeError("malformed", "a str that is not UTF-8") from None
+    except RecursionError:
+        raise DecodeError("malformed", "nesting too deep") from None
+
+
+def _validation_reason(text: str) -> str:
+    """A schema violation's reason from msgspec's message (e.g. "Expected `int`, got `str` - at `$.s`")."""
+    if "length <=" in text:
+        return "oversize"
+    if "missing required field" in text or "unknown field" in text or "matching regex" in text or "` >=" in text \
+            or "` <=" in text or "length >=" in text:
+        return "bad_field"
+    return "bad_type"
+
+
+def _check_version(data: bytes) -> None:
+    """On a failed envelope, report a missing, mistyped or other version before anything else."""
+    try:
+        version = _VERSION.decode(data).v
+    except (msgspec.MsgspecError, RecursionError, UnicodeDecodeError):
+        return
+    if version is msgspec.UNSET:
+        raise DecodeError("bad_field", "missing field 'v' (version)")
+    if not is_int(version):
+        raise DecodeError("bad_type", "version must be an int")
+    if version != SCHEMA_VERSION:
+        raise DecodeError("version", f"schema version {version}, expected {SCHEMA_VERSION}")
+
+
+def _check_outgoing_header(body: dict, kinds: Set[str]) -> None:
+    """The receiver's header rules, for :func:`encode` (``ValueError`` naming the fault)."""
+    try:
+        _BODY.decode(_ENCODER.encode({**body, "p": {}}))
+    except msgspec.ValidationError as exc:
+        raise ValueError(f"cannot encode envelope: {exc}") from None
+    except TypeError:
+        raise ValueError("cannot encode envelope: a header field has no wire form") from None
+    if body["v"] != SCHEMA_VERSION or not math.isfinite(body["t"]) or body["k"] not in kinds:
+        raise ValueError(f"cannot encode envelope: version {body['v']}, stamp {body['t']}, kind {body['k']!r}")
 
 
 @dataclass(frozen=True)
@@ -220,19 +293,20 @@ class Header:
 
 
 def peek_header(data: bytes) -> Header | None:
-    """Kind, origin, seq and stamp of an envelope without decoding its payload, for the emulated radio
-    (``None`` if unreadable). Nothing is validated: :func:`decode` judges the same bytes afterwards."""
+    """Kind, origin, seq and stamp of an envelope without reading its payload, for the emulated radio
+    (``None`` if unreadable; the header comes before the payload, so a cut payload does not matter).
+    Nothing is validated: :func:`decode` judges the same bytes afterwards."""
     try:
         unpacker = msgpack.Unpacker(max_buffer_size=len(data) or 1, raw=False, strict_map_key=False)
         unpacker.feed(data)
         fields: dict = {}
         for _ in range(unpacker.read_map_header()):
-            key = unpacker.unpack()
-            if key == "p":
+            name = unpacker.unpack()
+            if name == "p":
                 break
             value = unpacker.unpack()
-            if key in _HEADER:
-                fields[key] = value
+            if name in _HEADER:
+                fields[name] = value
     except Exception:  # any malformed input: not ours to judge
         return None
     kind, origin, seq, stamp = (fields.get(k) for k in _HEADER)
@@ -241,72 +315,20 @@ def peek_header(data: bytes) -> Header | None:
     return Header(kind, origin, seq, float(stamp)) if ok else None
 
 
-def _unpack(data: bytes, max_bytes: int):
-    try:
-        return msgpack.unpackb(
-            data,
-            raw=False,
-            strict_map_key=True,
-            ext_hook=_ext_hook,
-            max_bin_len=max_bytes,
-            max_str_len=max_bytes,
-            max_ext_len=max_bytes,
-            max_array_len=MAX_CONTAINER_LEN,
-            max_map_len=MAX_MAP_LEN,
-        )
-    except DecodeError:
-        raise
-    except msgpack.ExtraData:
-        raise DecodeError("malformed", "trailing bytes after the message") from None
-    except msgpack.StackError:
-        raise DecodeError("malformed", "nesting too deep") from None
-    except Exception as exc:
-        text = str(exc)
-        if "incomplete input" in text:
-            raise DecodeError("truncated", "input ends inside a msgpack object") from None
-        if "exceeds max_" in text:
-            raise DecodeError("oversize", text) from None
-        raise DecodeError("malformed", f"not msgpack ({type(exc).__name__})") from None
+def _plain(value):
+    """numpy scalars as Python numbers (so an ``np.int64`` seq is accepted like an ``int``)."""
+    return value.item() if isinstance(value, np.integer | np.floating) else value
 
 
-def _check_header(obj: dict, kinds: Set[str]) -> None:
-    """Version first (another version may have other fields), then the field set, types and ranges."""
-    if "v" not in obj:
-        raise DecodeError("bad_field", "missing field 'v' (version)")
-    if not is_int(obj["v"]):
-        raise DecodeError("bad_type", "version must be an int")
-    if obj["v"] != SCHEMA_VERSION:
-        raise DecodeError("version", f"schema version {obj['v']}, expected {SCHEMA_VERSION}")
-    missing = [f"{k!r} ({v})" for k, v in _FIELDS.items() if k not in obj]
-    unknown = sorted(repr(k) for k in obj if k not in _FIELDS)
-    if missing or unknown:
-        raise DecodeError("bad_field", f"missing {', '.join(missing) or '-'}; unknown {', '.join(unknown) or '-'}")
-    kind, origin, seq, stamp, acks, payload = (obj[k] for k in "kostap")
-    if not isinstance(kind, str) or not isinstance(origin, str) or not isinstance(payload, dict):
-        raise DecodeError("bad_type", "kind and origin must be str, payload a map")
-    if not is_int(seq) or isinstance(stamp, bool) or not isinstance(stamp, int | float) or not isinstance(acks, dict):
-        raise DecodeError("bad_type", "seq must be an int, stamp a number, acks a map")
-    if not _AGENT_ID.fullmatch(origin):
-        raise DecodeError("bad_field", f"origin {origin[:80]!r} is not an agent id")
-    if not 0 <= seq < _SEQ_LIMIT:
-        raise DecodeError("bad_field", f"seq {seq} outside [0, 2**64)")
-    if not math.isfinite(stamp):
-        raise DecodeError("non_finite", "stamp is not finite")
-    if len(acks) > MAX_ACKS:
-        raise DecodeError("oversize", f"{len(acks)} acks > {MAX_ACKS}")
-    for peer, last in acks.items():
-        if not isinstance(peer, str) or not is_int(last):
-            raise DecodeError("bad_type", "acks must map str agent ids to int seqs")
-        if not _AGENT_ID.fullmatch(peer) or not 0 <= last < _SEQ_LIMIT:
-            raise DecodeError("bad_field", f"ack {peer[:80]!r}: {last} is not an agent id and a seq")
-    if kind not in kinds:
-        raise DecodeError("unknown_kind", f"kind {kind[:80]!r}")
-    if any(not isinstance(k, str) for k in payload):
-        raise DecodeError("bad_type", "payload keys must be str")
+def is_int(value) -> bool:
+    """An int that is not a bool (MessagePack gives bools for true/false)."""
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _check_payload(payload) -> None:
-    """Depth and leaf types of the payload tree, iteratively (no recursion on hostile input)."""
+def _check_tree(payload) -> None:
+    """Depth and leaf types of a generic payload, iteratively (no recursion on hostile input). Only the kinds
+    that the ground station and the simulator read are generic (:mod:`agent.net.schemas`): the agents' own
+    traffic never pays this walk."""
     stack = [(payload, 0)]
     while stack:
         node, depth = stack.pop()
@@ -322,16 +344,6 @@ def _check_payload(payload) -> None:
             raise DecodeError("bad_type", f"payload holds a {type(node).__name__}")
 
 
-def _plain(value):
-    """numpy scalars as Python numbers (so an ``np.int64`` seq is accepted like an ``int``)."""
-    return value.item() if isinstance(value, np.integer | np.floating) else value
-
-
-def is_int(value) -> bool:
-    """An int that is not a bool (msgpack gives bools for true/false)."""
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
 # -- MAC ---------------------------------------------------------------------------------------------
 def _check_key(key) -> None:
     if not isinstance(key, bytes) or not key:
@@ -342,20 +354,19 @@ def _mac(key: bytes, signed: bytes) -> bytes:
     return hmac.new(key, signed, hashlib.sha256).digest()
 
 
-def _verify_mac(obj: dict, data: bytes, key: bytes) -> None:
-    mac = obj.get("mac")
-    if mac is None:
-        raise DecodeError("bad_mac", "message carries no mac but a fleet key is configured")
-    if not isinstance(mac, bytes) or len(mac) != MAC_BYTES or next(reversed(obj)) != "mac" or data[-MAC_BYTES:] != mac:
-        raise DecodeError("bad_mac", "mac must be the last field and 32 bytes")
-    if not hmac.compare_digest(mac, _mac(key, data[:-MAC_BYTES])):
+def _verify_mac(data: bytes, key: bytes) -> None:
+    """The MAC is judged on the raw bytes, before any field is parsed: the message must end with the key
+    ``"mac"``, a 32-byte bin header and the HMAC of everything before those 32 bytes."""
+    if len(data) < len(_MAC_TAIL) + MAC_BYTES or data[-MAC_BYTES - len(_MAC_TAIL):-MAC_BYTES] != _MAC_TAIL:
+        raise DecodeError("bad_mac", "message does not end with a 32-byte mac field but a fleet key is configured")
+    if not hmac.compare_digest(data[-MAC_BYTES:], _mac(key, data[:-MAC_BYTES])):
         raise DecodeError("bad_mac", "wrong mac")
 
 
 # -- arrays ------------------------------------------------------------------------------------------
-def _pack_default(obj):
+def _enc_hook(obj):
     if isinstance(obj, np.ndarray):
-        return msgpack.ExtType(EXT_NDARRAY, _pack_array(obj))
+        return msgspec.msgpack.Ext(EXT_NDARRAY, _pack_array(obj))
     if isinstance(obj, np.bool_):
         return bool(obj)
     if isinstance(obj, np.integer):
@@ -375,25 +386,45 @@ def _pack_array(arr: np.ndarray) -> bytes:
     return header + arr.astype(dtype, copy=False).tobytes(order="C")
 
 
-def _ext_hook(code: int, data: bytes) -> np.ndarray:
-    """Called by msgpack for every ExtType: the array is checked before anything is allocated."""
+def _ext_hook(code: int, data) -> np.ndarray:
+    """Called by the decoder for every ExtType: the array is checked before anything is allocated."""
     if code != EXT_NDARRAY:
-        raise DecodeError("bad_type", f"unknown msgpack ext type {code}")
+        raise DecodeError("bad_type", f"unknown MessagePack ext type {code}")
     if len(data) < 4:
         raise DecodeError("bad_shape", "array header shorter than 4 bytes")
-    dtype_str, ndim = data[:3].decode("ascii", "replace"), data[3]
-    if dtype_str not in ALLOWED_DTYPES:
-        raise DecodeError("bad_type", f"array dtype {dtype_str!r} is not allowed")
+    dtype, ndim = _DTYPES.get(bytes(data[:3])), data[3]
+    if dtype is None:
+        raise DecodeError("bad_type", f"array dtype {bytes(data[:3])!r} is not allowed")
     if ndim > MAX_NDIM or len(data) < 4 + 4 * ndim:
         raise DecodeError("bad_shape", f"array header of {ndim} dims is invalid")
-    shape = struct.unpack_from(f"<{ndim}I", data, 4)
+    shape = _DIMS[ndim].unpack_from(data, 4)
     count = math.prod(shape)
     if count > MAX_ARRAY_ELEMENTS:
         raise DecodeError("oversize", f"array of {count} elements > {MAX_ARRAY_ELEMENTS}")
-    dtype = np.dtype(dtype_str)
-    raw = memoryview(data)[4 + 4 * ndim :]
-    if len(raw) != count * dtype.itemsize:
-        raise DecodeError(
-            "bad_shape", f"shape {shape} of {dtype_str} needs {count * dtype.itemsize} bytes, got {len(raw)}"
-        )
-    return np.frombuffer(raw, dtype=dtype, count=count).reshape(shape).copy()
+    if len(data) - 4 - 4 * ndim != count * dtype.itemsize:
+        raise DecodeError("bad_shape", f"shape {shape} of {dtype.str} needs {count * dtype.itemsize} bytes, "
+                                       f"got {len(data) - 4 - 4 * ndim}")
+    return np.frombuffer(data, dtype, count, 4 + 4 * ndim).reshape(shape).copy()
+
+
+_DTYPES = {name.encode("ascii"): np.dtype(name) for name in ALLOWED_DTYPES}
+_DIMS = [struct.Struct(f"<{n}I") for n in range(MAX_NDIM + 1)]
+
+
+def _dec_hook(kind: type, obj):
+    """A schema's ``np.ndarray`` field accepts only what :func:`_ext_hook` built."""
+    if kind is np.ndarray and isinstance(obj, np.ndarray):
+        return obj
+    raise msgspec.ValidationError(f"Expected an array, got `{type(obj).__name__}`")
+
+
+def _decoder(schema) -> msgspec.msgpack.Decoder:
+    return msgspec.msgpack.Decoder(schema, ext_hook=_ext_hook, dec_hook=_dec_hook)
+
+
+_ENCODER = msgspec.msgpack.Encoder(enc_hook=_enc_hook)
+_BODY = msgspec.msgpack.Decoder(_Body)
+_VERSION = msgspec.msgpack.Decoder(_Version)
+#: kind -> (decoder, reason) for the typed kinds; the others decode as :data:`_GENERIC` plus :func:`_check_tree`.
+_PAYLOADS = {k: (_decoder(s.type), s.reason) for k, s in schemas.PAYLOADS.items() if s.type is not schemas.Generic}
+_GENERIC = _decoder(schemas.Generic)

@@ -145,9 +145,10 @@ def test_a_malformed_flood_message_is_refused_and_changes_nothing(fault):
     agents, _ = run("position", "damped", steps=4, settle=0)
     ex = agents["a"]
     before = (ex.relay.acks(), ex.relay.metrics(), [(i, e.mean.copy()) for i, e in ex.tracker.estimates()])
-    with pytest.raises(wire.DecodeError) as err:
-        ex.receive("b", 99, 0.8, BAD_PAYLOADS[fault], False, 0.8)
-    assert err.value.reason == "bad_field", fault
+    with pytest.raises(wire.DecodeError) as err:  # the agent's path: the wire's schema, then the exchange
+        data = wire.encode(wire.Envelope(kind="track", origin="b", seq=99, stamp=0.8, payload=BAD_PAYLOADS[fault]))
+        ex.receive("b", 99, 0.8, wire.decode(data).payload, False, 0.8)
+    assert err.value.reason in ("bad_field", "bad_type"), fault
     after = (ex.relay.acks(), ex.relay.metrics(), [(i, e.mean.copy()) for i, e in ex.tracker.estimates()])
     assert before[:2] == after[:2]
     assert all(i == j and np.array_equal(m, n) for (i, m), (j, n) in zip(before[2], after[2], strict=True))

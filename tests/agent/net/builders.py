@@ -31,7 +31,7 @@ def random_trajectory(rng: np.random.Generator, steps: int = 5) -> Trajectory:
 
 
 def envelope(payload=None, **overrides) -> Envelope:
-    fields = dict(kind="track", origin="uav-01", seq=42, stamp=12.5, acks={"uav-02": 7, "gcs_0": 0})
+    fields = dict(kind="clock", origin="uav-01", seq=42, stamp=12.5, acks={"uav-02": 7, "gcs_0": 0})
     fields.update(overrides)
     return Envelope(payload={} if payload is None else payload, **fields)
 

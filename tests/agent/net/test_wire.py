@@ -50,7 +50,7 @@ def _valid_body() -> dict:
     g = random_gaussian(np.random.default_rng(0), 3)
     return {
         "v": 1,
-        "k": "track",
+        "k": "clock",
         "o": "uav-01",
         "s": 42,
         "t": 12.5,
@@ -90,7 +90,7 @@ def test_envelope_round_trip_with_arrays_of_every_allowed_dtype_and_plain_values
     }
     env = envelope(payload)
     out = decode(encode(env), expected_origin="uav-01")
-    assert (out.version, out.kind, out.origin, out.seq, out.stamp) == (1, "track", "uav-01", 42, 12.5)
+    assert (out.version, out.kind, out.origin, out.seq, out.stamp) == (1, "clock", "uav-01", 42, 12.5)
     assert out.acks == env.acks
     for dt, a in arrays.items():
         b = out.payload["arrays"][dt]
@@ -147,10 +147,15 @@ def test_encode_refuses_what_a_receiver_would_reject():
 
 
 # -- rejected bytes: framing and size ----------------------------------------------------------------
-def test_every_proper_prefix_of_a_valid_message_is_truncated():
-    data = encode(envelope(encode_gaussian(random_gaussian(np.random.default_rng(6)))), key=KEY)
-    for cut in range(len(data)):
-        assert reason_of(data[:cut], key=KEY) == "truncated", cut
+def test_every_proper_prefix_of_a_valid_message_is_truncated_and_of_a_signed_one_bad_mac():
+    """Unsigned, the parser finds the cut; signed, the MAC is judged on the raw bytes before any parsing, and
+    a cut message no longer ends with its MAC."""
+    payload = encode_gaussian(random_gaussian(np.random.default_rng(6)))
+    data, signed = encode(envelope(payload)), encode(envelope(payload), key=KEY)
+    for cut in range(1, len(data)):
+        assert reason_of(data[:cut]) == "truncated", cut
+    for cut in range(len(signed)):
+        assert reason_of(signed[:cut], key=KEY) == "bad_mac", cut
 
 
 def test_trailing_garbage_after_a_valid_message_is_malformed():
@@ -159,7 +164,7 @@ def test_trailing_garbage_after_a_valid_message_is_malformed():
 
 def test_bytes_that_are_not_msgpack_are_malformed():
     assert reason_of(b"\xc1") == "malformed"  # 0xc1 is never used in msgpack
-    assert reason_of(b"\xa2\xff\xfe") == "malformed"  # a str that is not UTF-8
+    assert reason_of(b"\x81\xa2\xff\xfe\xc0") == "malformed"  # a map whose key is not UTF-8
 
 
 def test_input_that_is_not_bytes_is_bad_type():
@@ -176,9 +181,10 @@ def test_a_message_larger_than_max_bytes_is_oversize():
     assert reason_of(pack(_valid_body()), max_bytes=64) == "oversize"
 
 
-def test_container_headers_beyond_the_limits_are_oversize_before_allocation():
-    assert reason_of(b"\xdd\xff\xff\xff\xff") == "oversize"  # array32 of 4 billion entries
-    assert reason_of(b"\xdf\xff\xff\xff\xff") == "oversize"  # map32 of 4 billion entries
+def test_container_headers_beyond_the_input_are_refused_before_allocation():
+    """msgspec checks a container's declared length against the bytes left before it allocates."""
+    assert reason_of(b"\xdd\xff\xff\xff\xff") == "bad_type"  # array32 of 4 billion entries: not an envelope
+    assert reason_of(b"\xdf\xff\xff\xff\xff") == "truncated"  # map32 of 4 billion entries
 
 
 def test_more_than_256_acks_is_oversize():
@@ -190,7 +196,7 @@ def test_nesting_deeper_than_the_limit_is_malformed():
     for _ in range(wire.MAX_DEPTH + 1):
         deep = [deep]
     assert reason_of(body_with(p={"deep": deep})) == "malformed"
-    assert reason_of(b"\x91" * 5000 + b"\x00") == "malformed"  # deeper than msgpack's own stack
+    assert reason_of(b"\x81\xa1p" + b"\x91" * 5000 + b"\x00") == "malformed"  # deeper than the decoder's stack
 
 
 # -- rejected bytes: header fields -------------------------------------------------------------------

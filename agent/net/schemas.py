@@ -1,0 +1,116 @@
+"""The payload schema of every message kind, as types msgspec validates in C (``docs/wire.md``).
+
+One job: say what each kind's payload (``"p"`` of :mod:`agent.net.wire`'s envelope) may hold. A schema
+fixes the field names, the types of every element, the lengths of tuples and the bounds of sequence
+numbers; arrays are ``np.ndarray`` fields (the wire's ``EXT_NDARRAY``), whose dtype and shape the kind's
+codec then checks together with their values, vectorised (finite, positive definite). A payload that
+does not match its schema is rejected before any Python code touches it: ``bad_field`` (a field missing,
+a value out of range), ``bad_type`` (a wrong type), ``oversize`` (a list above its bound) — or the kind's
+own ``reason`` (the world's truth: ``bad_truth``).
+
+Kinds that peers exchange are typed to the last element. Kinds that only the ground station or the
+simulator read (``telemetry`` with the fields of every plug-in, ``measurement``, ``clock``, the grid and
+particle kinds whose codecs parse byte buffers) are ``Generic``: a str-keyed map of plain values and
+arrays, decoded in C and validated by their codecs.
+
+Unknown payload fields of a typed kind are ignored (a newer sender may add optional fields).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, Any, NotRequired, Required, TypedDict
+
+import msgspec
+import numpy as np
+
+AGENT_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}\Z"
+AgentId = Annotated[str, msgspec.Meta(pattern=AGENT_ID_PATTERN)]  # the envelope's origin and acks
+#: A peer named inside a payload: bounded, not pattern-matched (a regex per name costs ~1.5 µs in msgspec, and
+#: a name that is no agent's only ever misses a lookup).
+PeerName = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
+Seq = Annotated[int, msgspec.Meta(ge=0)]  # MessagePack integers stop below 2**64
+Vec3 = tuple[float, float, float]
+MAX_TRACKS = 256  # tracks in one message (chosen here; a fleet tracks tens)
+MAX_INCREMENTS = 1024  # flooded increments in one message (chosen here; one per agent and step at most)
+MAX_PEERS = 256  # entries of a per-peer map (= wire.MAX_ACKS)
+MAX_TARGETS = 4096  # targets in the world's truth (chosen here)
+
+Generic = dict[str, Any]
+
+
+class TrajectoryPayload(TypedDict):
+    """A trajectory belief in information form, its band only (:func:`agent.net.gaussian_codec.encode_trajectory`)."""
+
+    epoch: int
+    n: int
+    L: int
+    y: np.ndarray  # (L*n,) float
+    diag: np.ndarray  # (L, n, n) float
+    off: np.ndarray  # (L-1, n, n) float
+
+
+class TrackEntry(TypedDict, total=False):
+    """One shared track under a channel-filter policy (:mod:`agent.beliefs.tracks`)."""
+
+    id: Required[int]
+    belief: Required[TrajectoryPayload]
+    last_measured: Required[float]
+    acks: Annotated[dict[PeerName, Seq], msgspec.Meta(max_length=MAX_PEERS)]
+    resync: Annotated[dict[PeerName, Seq], msgspec.Meta(max_length=MAX_PEERS)]
+    fresh: int
+
+
+#: ``[origin, n, bearings]``: one flooded increment (:mod:`agent.beliefs.flood`); bearings a (k, 9) array.
+Increment = tuple[PeerName, Seq, np.ndarray]
+#: ``[highest, mask]``: the increments of one origin a sender holds (:class:`agent.net.flood_relay.Held`).
+HeldWire = tuple[Annotated[int, msgspec.Meta(ge=-1)], Annotated[int, msgspec.Meta(ge=0)]]
+
+
+class TrackPayload(TypedDict, total=False):
+    """Kind ``track``: shared tracks (channel filters) or, under ``policy = "flood"``, flooded detections
+    with their acknowledgements. The receiving exchange requires the fields of its policy."""
+
+    tracks: Annotated[list[TrackEntry], msgspec.Meta(max_length=MAX_TRACKS)]
+    increments: Annotated[list[Increment], msgspec.Meta(max_length=MAX_INCREMENTS)]
+    acks: Annotated[dict[PeerName, HeldWire], msgspec.Meta(max_length=MAX_PEERS)]
+
+
+class TopologyPayload(TypedDict):
+    """Kind ``topology``: who hears whom (:mod:`agent.net.topology`), ``{agent: [report time, [neighbours]]}``."""
+
+    reports: Annotated[dict[PeerName, tuple[float, Annotated[list[PeerName], msgspec.Meta(max_length=MAX_PEERS)]]],
+                       msgspec.Meta(max_length=MAX_PEERS)]
+
+
+class TargetTruth(TypedDict):
+    id: str
+    position: Vec3
+    velocity: Vec3
+
+
+class TruthPayload(TypedDict, total=False):
+    """Kind ``truth`` (the world, simulation only): target states, where every UAV is, and the fire."""
+
+    targets: Annotated[list[TargetTruth], msgspec.Meta(max_length=MAX_TARGETS)]
+    uavs: Annotated[dict[str, Vec3], msgspec.Meta(max_length=MAX_PEERS)]
+    fire: NotRequired[Generic]  # agent.net.fire_truth validates it (bad_fire)
+    decoys: NotRequired[list[Any]]  # advisory: malformed entries are ignored (agent.sensors.truth)
+
+
+@dataclass(frozen=True)
+class Schema:
+    type: Any
+    reason: str | None = None  # the kind's own reason for a schema violation (None: by the fault)
+
+
+PAYLOADS: dict[str, Schema] = {
+    "track": Schema(TrackPayload),
+    "topology": Schema(TopologyPayload),
+    "truth": Schema(TruthPayload, reason="bad_truth"),
+    "telemetry": Schema(Generic),
+    "measurement": Schema(Generic),
+    "clock": Schema(Generic),
+    "grid": Schema(Generic),
+    "grid_evidence": Schema(Generic),
+}
