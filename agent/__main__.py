@@ -64,7 +64,7 @@ def main(argv=None) -> int:
         print(f"agent {args.id}: {err}", file=sys.stderr)
         return 2
     duration = args.duration if args.duration is not None else scenario.duration
-    subscribe = [f"{keys.root}/belief/**", keys.telemetry("*"), keys.sim("truth")]
+    subscribe = keys.agent_subscriptions()
     transport = ZenohTransport(args.id, keys, config, subscribe)
     agent = Agent(args.id, args.index, scenario, transport, keys, seed=args.seed, fleet_key=key, camera=camera)
     stop = threading.Event()

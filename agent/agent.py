@@ -3,7 +3,8 @@
 ``Agent.step(t)`` reads the vehicle; every sensor measures (:class:`agent.plugins.Sensor`; simulated ones
 see the step's truth first); every belief exchange absorbs the observations it uses
 (:class:`agent.plugins.BeliefExchange`); received messages are decoded, validated and dispatched to the
-exchange of their kind; telemetry goes out; every exchange offers its message, sealed and charged to the
+exchange of their kind; telemetry goes out to the ground station and topology reports to the peers (when
+due); every exchange offers its message, sealed and charged to the
 link budget here; the planner turns the exchanges' views into a goal for the vehicle. The loop names no
 implementation: sensors, exchanges, planners and vehicles come from their registries.
 
@@ -20,7 +21,6 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
-from collections.abc import Iterator, Mapping
 
 from agent.beliefs import EXCHANGES, ExchangeContext
 from agent.config import AgentScenario
@@ -31,6 +31,7 @@ from agent.net.link_emulator import LinkEmulator
 from agent.net.radio import RadioTransport
 from agent.net.sending import SendScheduler
 from agent.net.topology import Topology
+from agent.plugins import Views
 from agent.sensors.registry import sensor_from_config
 from agent.sensors.truth import WorldTruth
 from agent.vehicles import vehicle_from_config
@@ -39,22 +40,6 @@ from perception.terrain import terrain_from_config
 from tasking.registry import PlanningContext, planner_from_config
 
 log = logging.getLogger("skymesh.agent")
-
-class Views(Mapping):
-    """The exchanges' views for the planner, each computed only if the planner reads it."""
-
-    def __init__(self, exchanges: dict):
-        self._exchanges = exchanges
-
-    def __getitem__(self, kind: str):
-        return self._exchanges[kind].view()
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._exchanges)
-
-    def __len__(self) -> int:
-        return len(self._exchanges)
-
 
 class Agent:
     """One agent of a fleet over ``transport`` (:class:`agent.plugins.Transport`). ``camera``: an open
@@ -116,6 +101,7 @@ class Agent:
         for item in self.transport.drain():
             self.receive(item, t)
         self._publish_telemetry(t, state)
+        self._publish_topology(t)
         neighbours = self.topology.neighbours(t)
         for exchange in self.exchanges.values():
             self._offer(exchange, t, neighbours)
@@ -161,10 +147,10 @@ class Agent:
         if env.kind == "truth":
             return self.world.accept(env)
         self.bytes_rx[(env.origin, env.kind)] += size
-        if env.kind == "telemetry" or env.kind in EXCHANGES:
+        if env.kind == "topology" or env.kind in EXCHANGES:
             self.topology.heard(env.origin, t)
-        if env.kind == "telemetry":
-            self.topology.learn(env.payload.get("topology"))
+        if env.kind == "topology":
+            self.topology.receive(env.origin, env.payload["reports"], t)
         exchange = self.exchanges.get(env.kind)
         if exchange is not None:
             edge = self.topology.edge(env.origin, t)
@@ -204,16 +190,28 @@ class Agent:
         exchange.sent(seq, message)
         self._send(self.keys.belief(exchange.kind, self.id), exchange.kind, data)
 
+    def _publish_topology(self, t: float) -> None:
+        """Who this agent hears, to its peers when it changed or a beacon is due (:mod:`agent.net.topology`)."""
+        payload = self.topology.outgoing(t)
+        if payload is not None:
+            self._publish("topology", self.keys.topology(self.id), t, payload)
+
     def _publish_telemetry(self, t: float, state) -> None:
+        """For the ground station (``telemetry/<agent>``): the agents do not subscribe to it."""
         payload = {"position": state.position, "velocity": state.velocity, "yaw": float(state.yaw),
-                   "neighbours": self.topology.neighbours(t), "topology": self.topology.gossip(t)}
+                   "neighbours": self.topology.neighbours(t)}
         for part in (*self.sensors, *self.exchanges.values()):
             payload.update(part.telemetry())
-        _, data = self._seal("telemetry", t, payload)
-        if self.sender.admit(len(data), t):
-            self._send(self.keys.telemetry(self.id), "telemetry", data)
-        else:
+        if not self._publish("telemetry", self.keys.telemetry(self.id), t, payload):
             self.telemetry_thinned += 1
+
+    def _publish(self, kind: str, key: str, t: float, payload: dict) -> bool:
+        """Seal and send a message charged to the link budget; ``False`` if the budget refused it."""
+        _, data = self._seal(kind, t, payload)
+        if not self.sender.admit(len(data), t):
+            return False
+        self._send(key, kind, data)
+        return True
 
     # -- results --------------------------------------------------------------------------------
     def metrics(self) -> dict:

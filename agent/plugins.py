@@ -22,7 +22,7 @@ message; the planner turns the exchanges' views into a goal.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -134,3 +134,19 @@ class BeliefExchange(Protocol):
         ...
 
     def metrics(self) -> dict: ...
+
+
+class Views(Mapping):
+    """The exchanges' views for the planner, each computed only if the planner reads it."""
+
+    def __init__(self, exchanges: dict):
+        self._exchanges = exchanges
+
+    def __getitem__(self, kind: str):
+        return self._exchanges[kind].view()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._exchanges)
+
+    def __len__(self) -> int:
+        return len(self._exchanges)

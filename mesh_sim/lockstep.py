@@ -27,11 +27,6 @@ from mesh_sim.scenario import Scenario
 from mesh_sim.world import World
 
 
-def agent_subscriptions(keys: Keys) -> list[str]:
-    """What an agent listens to (the same keys as ``python -m agent``)."""
-    return [f"{keys.root}/belief/**", keys.telemetry("*"), keys.sim("truth")]
-
-
 def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off", cameras: dict | None = None) -> dict:
     """Run ``scenario`` to completion in this process; returns the merged metrics. ``cameras`` maps an agent
     name to an OpenCV video source (file, device, URL) that replaces its synthetic camera."""
@@ -44,7 +39,7 @@ def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off", cameras:
         raise ValueError(f"--camera names no agent of this run: {sorted(unknown)}")
     sources = {name: VideoSource(source) for name, source in cameras.items()}  # ValueError if one cannot open
     agents = [
-        Agent(f"uav{i}", i, sc, bus.endpoint(f"uav{i}", agent_subscriptions(keys)), keys, seed=sc.seed * 1000 + i,
+        Agent(f"uav{i}", i, sc, bus.endpoint(f"uav{i}", keys.agent_subscriptions()), keys, seed=sc.seed * 1000 + i,
               camera=sources.get(f"uav{i}"))
         for i in range(sc.agents)
     ]

@@ -1,6 +1,7 @@
 """The fleet's key space and what a transport hands the agent (DESIGN.md §5). No Zenoh here.
 
-Key space ``skymesh/<fleet>/...``: ``belief/<kind>/<agent>``, ``telemetry/<agent>``,
+Key space ``skymesh/<fleet>/...``: ``belief/<kind>/<agent>``, ``topology/<agent>`` (who hears whom, for the
+peers), ``telemetry/<agent>`` (for the ground station: agents do not subscribe to it),
 ``sim/{truth,clock,measurement/<agent>}`` and liveliness tokens ``alive/<agent>``. The fleet name
 isolates concurrent runs on one machine.
 """
@@ -30,6 +31,14 @@ class Keys:
 
     def telemetry(self, agent: str) -> str:
         return f"{self.root}/telemetry/{agent}"
+
+    def topology(self, agent: str) -> str:
+        return f"{self.root}/topology/{agent}"
+
+    def agent_subscriptions(self) -> list[str]:
+        """What an agent listens to: its peers' beliefs and topology reports, and the world's truth (simulation
+        only) — not their telemetry, which is for the ground station."""
+        return [f"{self.root}/belief/**", self.topology("*"), self.sim("truth")]
 
     def sim(self, name: str) -> str:
         return f"{self.root}/sim/{name}"

@@ -1,9 +1,16 @@
 """What an agent knows of the communication graph, to decide which links are tree edges.
 
 Channel filters are exact only on tree edges: links that lie on no loop (bridges of the graph;
-Merino §2.5). Each agent reports the peers it heard recently, and its telemetry carries every fresh
-report it knows (its own and what it learnt from others), so reports spread over several hops. From
-them an agent rebuilds the graph and asks whether a link is a bridge.
+Merino §2.5). Each agent reports the peers it heard recently in a small ``topology`` message
+(``{"reports": {agent: [report time, [neighbours]]}}``, :class:`agent.net.schemas.TopologyPayload`) and
+rebuilds the graph from the reports it holds to ask whether a link is a bridge.
+
+Traffic by need (a link-state flood, as OSPF floods its link-state advertisements): an agent sends its own
+report when its neighbour set changes and otherwise every :data:`BEACON_PERIOD` (which also lets its
+neighbours hear it); it relays a report it has just learnt only when some neighbour of its own cannot have
+heard it already — from the report's agent or from the peer that passed it on. On a full mesh nothing is
+relayed, so each agent receives one small message per peer and beacon period: messages grow linearly with
+the fleet, not with its square (every agent used to put every report in its telemetry at every step).
 
 Knowledge is trusted only when it is complete: every agent that appears in a fresh report, as reporter
 or as neighbour, has a fresh report of its own. Otherwise every link is treated as possibly on a loop,
@@ -18,12 +25,16 @@ from fusion.network import bridges
 from fusion.resync import Edge
 
 NEIGHBOUR_TIMEOUT = 3.0  # s without hearing a peer before it stops being a neighbour; chosen here
+#: s between an agent's own reports while its neighbours do not change; chosen here: a third of
+#: NEIGHBOUR_TIMEOUT, so two lost beacons in a row do not drop a silent neighbour.
+BEACON_PERIOD = 1.0
 
 
 def report_lifetime(timeout: float) -> float:
     """How long another agent's report stays fresh. It must outlive every listing of that agent as
     someone's neighbour (a listing lasts ``timeout`` after the agent was last heard, and the report
-    itself may be one gossip hop older), or knowledge turns "incomplete" on links that never changed."""
+    itself may be one beacon period and a few relay hops older), or knowledge turns "incomplete" on links
+    that never changed."""
     return 2.0 * timeout + 1.0
 
 
@@ -33,7 +44,12 @@ class Topology:
         self.timeout = timeout
         self._heard: dict[str, float] = {}  # peer -> last time heard
         self._reports: dict[str, tuple[float, frozenset[str]]] = {}  # agent -> (report time, its neighbours)
+        self._news: dict[str, str] = {}  # agent -> the peer its newest report came from, since our last message
+        self._version = 0  # counts the reports learnt, for the edge memo
+        self._sent_mine: list[str] | None = None  # our neighbours in our last message, and when we sent it
+        self._sent_at = -float("inf")
         self._cache: tuple[frozenset, frozenset] | None = None  # (known graph, its bridges): graphs change rarely
+        self._memo: tuple | None = None  # ((t, version, our neighbours), bridges or None when incomplete)
 
     def heard(self, peer: str, t: float) -> None:
         self._heard[peer] = max(t, self._heard.get(peer, t))
@@ -41,25 +57,35 @@ class Topology:
     def neighbours(self, t: float) -> list[str]:
         return sorted(p for p, last in self._heard.items() if t - last <= self.timeout)
 
-    def learn(self, gossip) -> None:
-        """Merge reports ``{agent: [report time, [neighbours]]}`` received from a peer (newest wins).
-        Malformed entries are ignored: this is advisory data from the wire."""
-        if not isinstance(gossip, dict):
-            return
-        for agent, entry in gossip.items():
-            if agent == self.me or not isinstance(entry, list | tuple) or len(entry) != 2:
+    def receive(self, sender: str, reports: dict, t: float) -> None:
+        """Merge the ``reports`` ``{agent: (report time, [neighbours])}`` of a topology message from
+        ``sender`` (types checked by the wire's schema; newest wins); a report new to us is queued for
+        relaying (:meth:`outgoing`)."""
+        for agent, (when, neighbours) in reports.items():
+            if agent == self.me or (agent in self._reports and when <= self._reports[agent][0]):
                 continue
-            when, neighbours = entry
-            if isinstance(when, int | float) and isinstance(neighbours, list | tuple):
-                if agent not in self._reports or when > self._reports[agent][0]:
-                    self._reports[agent] = (float(when), frozenset(str(n) for n in neighbours))
+            self._reports[agent] = (float(when), frozenset(neighbours))
+            self._news[agent] = sender
+            self._version += 1
 
-    def gossip(self, t: float) -> dict:
-        """Every fresh report this agent knows, its own included, for its telemetry."""
-        lifetime = report_lifetime(self.timeout)
-        fresh = {a: [w, sorted(n)] for a, (w, n) in self._reports.items() if t - w <= lifetime}
-        fresh[self.me] = [t, self.neighbours(t)]
-        return fresh
+    def outgoing(self, t: float) -> dict | None:
+        """The topology message due at ``t``, or ``None``: our own report when our neighbours changed or a
+        beacon period has passed, and the reports learnt since our last message that some neighbour of ours
+        cannot have heard (see the module docstring)."""
+        mine = self.neighbours(t)
+        relay = {agent: [self._reports[agent][0], sorted(self._reports[agent][1])]
+                 for agent, sender in self._news.items() if self._worth_relaying(agent, sender, mine, t)}
+        self._news.clear()
+        if not relay and mine == self._sent_mine and t - self._sent_at < BEACON_PERIOD - 1e-9:
+            return None
+        self._sent_mine, self._sent_at = mine, t
+        return {"reports": {**relay, self.me: [t, mine]}}
+
+    def _worth_relaying(self, agent: str, sender: str, mine: list[str], t: float) -> bool:
+        """Does a neighbour of ours lack ``agent``'s report? Not if it is ``agent`` or ``sender`` or one of
+        their neighbours: it heard the report from them."""
+        covered = self.neighbours_of(agent, t) | self.neighbours_of(sender, t) | {agent, sender}
+        return any(n not in covered for n in mine)
 
     def neighbours_of(self, agent: str, t: float) -> frozenset[str]:
         """``agent``'s neighbours by its fresh report (our own for ``self.me``; empty if none is known)."""
@@ -70,17 +96,29 @@ class Topology:
 
     def edge(self, peer: str, t: float) -> Edge:
         """What ``(me, peer)`` is in the graph known at ``t``: ``TREE`` (a bridge) or ``LOOP`` when that knowledge
-        is complete, ``UNKNOWN`` when it is not."""
+        is complete, ``UNKNOWN`` when it is not. Computed once per step and state of knowledge (every message
+        received in a step asks)."""
+        mine = frozenset(self.neighbours(t))
+        key = (t, self._version, mine)
+        if self._memo is None or self._memo[0] != key:
+            self._memo = (key, self._bridges(t, mine))
+        found = self._memo[1]
+        if found is None:
+            return Edge.UNKNOWN
+        return Edge.TREE if frozenset((self.me, peer)) in found else Edge.LOOP
+
+    def _bridges(self, t: float, mine: frozenset[str]) -> frozenset | None:
+        """The bridges of the graph known at ``t``, or ``None`` when that knowledge is incomplete."""
         lifetime = report_lifetime(self.timeout)
         reports = {a: n for a, (w, n) in self._reports.items() if t - w <= lifetime}
-        reports[self.me] = frozenset(self.neighbours(t))
+        reports[self.me] = mine
         seen = set(reports) | {n for ns in reports.values() for n in ns}
         if not seen <= set(reports):
-            return Edge.UNKNOWN
+            return None
         graph = frozenset(frozenset((a, n)) for a, ns in reports.items() for n in ns if n != a)
         if self._cache is None or self._cache[0] != graph:
             names = sorted(seen)
             index = {name: i for i, name in enumerate(names)}
             found = bridges(len(names), [tuple(index[x] for x in e) for e in graph])
             self._cache = (graph, frozenset(frozenset(names[i] for i in e) for e in found))
-        return Edge.TREE if frozenset((self.me, peer)) in self._cache[1] else Edge.LOOP
+        return self._cache[1]

@@ -55,7 +55,7 @@ def fleet(measurement: str, motion: str) -> dict[str, FloodExchange]:
     for name in NAMES:
         topology = Topology(name)
         for other in NAMES:
-            topology.learn({other: [0.0, neighbours(other)]})
+            topology.receive(other, {other: (0.0, neighbours(other))}, 0.0)
         for peer in neighbours(name):
             topology.heard(peer, 0.0)
         out[name] = FloodExchange(name, config, STEP, GROUND, 0, SendScheduler(SendConfig(), None), Simulator(),

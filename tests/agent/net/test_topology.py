@@ -2,9 +2,10 @@
 
 ``Topology.edge`` (TREE / LOOP / UNKNOWN) is checked against a brute-force oracle: an edge is a bridge iff
 removing it leaves its two ends disconnected (breadth-first search),
-on random graphs that reach the agent as gossip reports. The
-completeness rule, the report lifetime, the neighbour timeout and the handling of malformed gossip are
-checked on small hand-built cases.
+on random graphs that reach the agent as topology reports. The
+completeness rule, the report lifetime, the neighbour timeout, when reports are sent and relayed (traffic by
+need) and the refusal of malformed topology messages by the wire's schema are checked on small hand-built
+cases.
 """
 
 from collections import deque
@@ -13,7 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.net.topology import NEIGHBOUR_TIMEOUT, Topology, report_lifetime
+from agent.net import wire
+from agent.net.topology import BEACON_PERIOD, NEIGHBOUR_TIMEOUT, Topology, report_lifetime
 from fusion.resync import Edge
 
 ME = "a0"
@@ -43,8 +45,14 @@ def topology_from(reports: dict[str, list[str]], heard: list[str], t: float, tim
     topo = Topology(ME, timeout)
     for peer in heard:
         topo.heard(peer, t)
-    topo.learn({a: [t, ns] for a, ns in reports.items()})
+    tell(topo, {a: [t, ns] for a, ns in reports.items()})
     return topo
+
+
+def tell(topo: Topology, reports: dict, sender: str = "a1", t: float = 0.0) -> None:
+    """Hand ``topo`` a topology message from ``sender`` as the agent does: through the wire's schema."""
+    data = wire.encode(wire.Envelope(kind="topology", origin=sender, seq=1, stamp=t, payload={"reports": reports}))
+    topo.receive(sender, wire.decode(data).payload["reports"], t)
 
 
 @st.composite
@@ -89,7 +97,7 @@ def test_edge_matches_brute_force_bridges(first, second):
     _, reports, heard, expected = second
     for peer in heard:
         topo.heard(peer, 20.0)
-    topo.learn({a: [20.0, ns] for a, ns in reports.items()})
+    tell(topo, {a: [20.0, ns] for a, ns in reports.items()})
     assert {p: topo.edge(p, 20.0) for p in expected} == expected
 
 
@@ -99,7 +107,7 @@ def test_line_tree_edges_and_a_loop_removes_them():
     assert topo.edge("a1", 0.0) is Edge.TREE
     assert topo.edge("a2", 0.0) is Edge.LOOP  # not a neighbour of a0: not a bridge of the known graph
     # close the loop a0 - a1 - a2 - a0 (only a2 reports the new edge): no edge of a0 is a bridge
-    topo.learn({"a2": [1.0, ["a1", ME]]})
+    tell(topo, {"a2": [1.0, ["a1", ME]]})
     assert topo.edge("a1", 1.0) is Edge.LOOP
 
 
@@ -107,7 +115,7 @@ def test_an_agent_mentioned_without_a_report_makes_knowledge_incomplete():
     # a1 reports a neighbour a2 that never reported: a2 might close a loop, so nothing is trusted
     topo = topology_from({"a1": [ME, "a2"]}, ["a1"], 0.0)
     assert topo.edge("a1", 0.0) is Edge.UNKNOWN
-    topo.learn({"a2": [0.0, ["a1"]]})
+    tell(topo, {"a2": [0.0, ["a1"]]})
     assert topo.edge("a1", 0.0) is Edge.TREE
     # a neighbour ME hears but that has no report of its own
     topo.heard("a3", 0.0)
@@ -119,42 +127,72 @@ def test_report_lifetime():
     lifetime = report_lifetime(timeout)
     assert lifetime == 2 * timeout + 1.0
     topo = Topology(ME, timeout)
-    topo.learn({"a1": [10.0, [ME]]})
+    tell(topo, {"a1": [10.0, [ME]]})
     for t in (10.0, 10.0 + lifetime):
         topo.heard("a1", t)
         assert topo.edge("a1", t) is Edge.TREE
-        assert "a1" in topo.gossip(t)
+        assert topo.neighbours_of("a1", t) == {ME}
     t = 10.0 + lifetime + 0.01  # a1's report has expired: a1 is heard, but unknown
     topo.heard("a1", t)
     assert topo.edge("a1", t) is Edge.UNKNOWN
-    assert set(topo.gossip(t)) == {ME}
+    assert topo.neighbours_of("a1", t) == frozenset()
 
 
 def test_newest_report_wins():
     topo = Topology(ME)
-    topo.learn({"a1": [5.0, [ME]]})
-    topo.learn({"a1": [4.0, [ME, "a2"]]})  # older: ignored
-    assert topo.gossip(5.0)["a1"] == [5.0, [ME]]
-    topo.learn({"a1": [6.0, ["a2"]]})
-    assert topo.gossip(6.0)["a1"] == [6.0, ["a2"]]
+    tell(topo, {"a1": [5.0, [ME]]})
+    tell(topo, {"a1": [4.0, [ME, "a2"]]})  # older: ignored
+    assert topo.neighbours_of("a1", 5.0) == {ME}
+    tell(topo, {"a1": [6.0, ["a2"]]})
+    assert topo.neighbours_of("a1", 6.0) == {"a2"}
 
 
-def test_gossip_carries_own_report_and_fresh_ones():
+def test_own_report_goes_out_when_the_neighbours_change_or_a_beacon_is_due():
     topo = Topology(ME)
-    topo.heard("a2", 1.0)
-    topo.heard("a1", 2.0)
-    topo.learn({"a1": [1.5, [ME]], "a3": [-100.0, ["a1"]]})  # a3's report is long expired
-    assert topo.gossip(2.0) == {ME: [2.0, ["a1", "a2"]], "a1": [1.5, [ME]]}
+    assert topo.outgoing(0.0) == {"reports": {ME: [0.0, []]}}  # the first beacon: peers hear us
+    assert topo.outgoing(0.2) is None
+    topo.heard("a1", 0.3)
+    assert topo.outgoing(0.4) == {"reports": {ME: [0.4, ["a1"]]}}  # a new neighbour: at once
+    topo.heard("a1", 1.2)
+    assert topo.outgoing(1.2) is None  # nothing changed, beacon not due
+    assert topo.outgoing(0.4 + BEACON_PERIOD) == {"reports": {ME: [0.4 + BEACON_PERIOD, ["a1"]]}}
+    assert topo.outgoing(2.0) is None
+    assert topo.outgoing(4.5) == {"reports": {ME: [4.5, []]}}  # a1 timed out (3 s): a change
 
 
-# Each bad entry is newer (t = 1) than a1's good report (t = 0) and, were it accepted, would replace it or
-# mention an agent a5 that never reported, making the knowledge incomplete: edge would turn UNKNOWN.
+def test_a_full_mesh_relays_nothing_and_a_line_relays_each_new_report_once():
+    """Full mesh a0, a1, a2: every neighbour of a0 heard a1's report from a1 itself. Line a1 - a0 - a2: a2
+    cannot hear a1, so a0 relays a1's new report once (and not again until a1 reports anew)."""
+    mesh = Topology(ME)
+    for peer in ("a1", "a2"):
+        mesh.heard(peer, 1.0)
+    tell(mesh, {"a2": [1.0, ["a0", "a1"]]}, sender="a2", t=1.0)
+    tell(mesh, {"a1": [1.0, ["a0", "a2"]]}, sender="a1", t=1.0)
+    assert mesh.outgoing(1.0) == {"reports": {ME: [1.0, ["a1", "a2"]]}}
+    line = Topology(ME)
+    for peer in ("a1", "a2"):
+        line.heard(peer, 1.0)
+    tell(line, {"a2": [1.0, ["a0"]]}, sender="a2", t=1.0)
+    tell(line, {"a1": [1.0, ["a0"]]}, sender="a1", t=1.0)
+    assert line.outgoing(1.0) == {"reports": {"a1": [1.0, ["a0"]], "a2": [1.0, ["a0"]], ME: [1.0, ["a1", "a2"]]}}
+    tell(line, {"a1": [1.0, ["a0"]]}, sender="a1", t=1.2)  # the same report again: not news
+    assert line.outgoing(1.2) is None
+    tell(line, {"a1": [2.0, ["a0"]]}, sender="a1", t=2.0)  # a1's next beacon: relayed to a2
+    assert line.outgoing(2.0)["reports"]["a1"] == [2.0, ["a0"]]
+
+
+def test_a_report_about_me_is_ignored():
+    topo = topology_from({"a1": [ME]}, ["a1"], 0.0)
+    tell(topo, {ME: [1.0, ["a1", "a5"]]})  # only I know my neighbours
+    assert topo.edge("a1", 1.0) is Edge.TREE
+
+
+# Each bad entry would, were it accepted, replace a1's good report or mention an agent that never reported.
 @pytest.mark.parametrize(
     "bad",
     [
-        pytest.param(["a1", [1.0, [ME, "a5"]]], id="gossip is a list, not a dict"),
-        pytest.param(None, id="gossip is None"),
-        pytest.param("a1", id="gossip is a string"),
+        pytest.param([["a1", [1.0, [ME, "a5"]]]], id="reports is a list, not a map"),
+        pytest.param(None, id="reports is None"),
         pytest.param({"a1": "1.0 a0 a5"}, id="entry is a string, not [time, neighbours]"),
         pytest.param({"a1": [1.0]}, id="entry has one element"),
         pytest.param({"a1": [1.0, [ME, "a5"], "extra"]}, id="entry has three elements"),
@@ -163,23 +201,15 @@ def test_gossip_carries_own_report_and_fresh_ones():
         pytest.param({"a1": [1.0, "a5"]}, id="neighbours is a string, not a list"),
         pytest.param({"a1": [1.0, None]}, id="neighbours is None"),
         pytest.param({"a5": [1.0, {ME: 1}]}, id="neighbours is a dict"),
-        pytest.param({ME: [1.0, ["a1", "a5"]]}, id="a report about me (only I know my neighbours)"),
+        pytest.param({"a1": [1.0, [ME, 5]]}, id="a neighbour is a number"),
+        pytest.param({"": [1.0, [ME]]}, id="an empty agent name"),
     ],
 )
-def test_malformed_gossip_is_ignored(bad):
-    topo = topology_from({"a1": [ME]}, ["a1"], 0.0)
-    before = topo.gossip(1.0)
-    topo.learn(bad)
-    assert topo.gossip(1.0) == before
-    assert topo.edge("a1", 1.0) is Edge.TREE
-
-
-def test_malformed_entries_do_not_stop_good_ones():
-    topo = Topology(ME)
-    topo.heard("a1", 0.0)
-    topo.learn({"a2": ["now", [ME]], "a1": [0.0, [ME]]})  # a2's time is a string; a1's entry is fine
-    assert set(topo.gossip(0.0)) == {ME, "a1"}
-    assert topo.edge("a1", 0.0) is Edge.TREE
+def test_a_malformed_topology_message_is_refused_by_the_schema(bad):
+    data = wire.encode(wire.Envelope(kind="topology", origin="a1", seq=1, stamp=1.0, payload={"reports": bad}))
+    with pytest.raises(wire.DecodeError) as err:
+        wire.decode(data)
+    assert err.value.reason in ("bad_type", "bad_field")
 
 
 def test_neighbour_timeout():

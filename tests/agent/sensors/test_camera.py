@@ -25,7 +25,7 @@ from agent.sensors.video_source import VideoSource
 from agent.vehicles.base import VehicleState
 from fusion.measurement import azel_to_los
 from mesh_sim.cli import main as skymesh
-from mesh_sim.lockstep import agent_subscriptions, run_lockstep
+from mesh_sim.lockstep import run_lockstep
 from mesh_sim.scenario import load
 from perception.camera import Intrinsics
 from perception.pose import CameraPose, Gimbal
@@ -241,7 +241,7 @@ def test_the_agent_counts_bad_frames_in_its_metrics(tmp_path):
     scenario = load("camera", agents=1, duration=2.0).agent
     keys = Keys(f"t-{uuid.uuid4().hex[:8]}")
     bus = InMemoryBus()
-    agent = Agent("uav0", 0, scenario, bus.endpoint("uav0", agent_subscriptions(keys)), keys, seed=0,
+    agent = Agent("uav0", 0, scenario, bus.endpoint("uav0", keys.agent_subscriptions()), keys, seed=0,
                   camera=ScriptedSource(BAD_FRAMES))
     for k in range(len(BAD_FRAMES)):
         agent.step(0.2 * k)
@@ -329,7 +329,7 @@ def test_telemetry_carries_the_video_quality():
     scenario = load("camera", agents=1, duration=2.0).agent
     keys = Keys(f"t-{uuid.uuid4().hex[:8]}")
     bus = InMemoryBus()
-    agent = Agent("uav0", 0, scenario, bus.endpoint("uav0", agent_subscriptions(keys)), keys, seed=0)
+    agent = Agent("uav0", 0, scenario, bus.endpoint("uav0", keys.agent_subscriptions()), keys, seed=0)
     watch = bus.endpoint("watch", [keys.telemetry("*")])
     for k in range(3):
         agent.step(0.2 * k)
