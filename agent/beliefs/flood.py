@@ -89,7 +89,7 @@ class FloodExchange(TrackExchange):
         (:class:`agent.net.schemas.TrackPayload`) has fixed the types; here the fields of this policy must be
         there, the acknowledgement masks in range and the bearings well formed."""
         increments, acks = payload.get("increments"), payload.get("acks")
-        if increments is None or acks is None:
+        if not isinstance(increments, list) or not isinstance(acks, dict):
             raise wire.DecodeError("bad_field", "a flood message needs an increments list and an acks map")
         try:
             held = {origin: Held.from_wire(entry) for origin, entry in acks.items()}
@@ -97,7 +97,10 @@ class FloodExchange(TrackExchange):
             raise wire.DecodeError("bad_field", f"acks: {err}") from None
         out = []
         newest = (self.tracker.epoch + FUTURE_EPOCHS) * self.tracker.model.step
-        for origin, n, rows in increments:
+        for entry in increments:
+            if len(entry) != 3 or not wire.is_int(entry[1]) or entry[1] < 0:  # the schema's rule, for any caller
+                raise wire.DecodeError("bad_field", "an increment is [origin, number >= 0, bearings]")
+            origin, n, rows = entry
             bearings = decode_bearings(rows)
             if max(b.t for b in bearings) > newest:
                 raise wire.DecodeError("future_epoch", f"detections more than {FUTURE_EPOCHS} steps ahead of ours")

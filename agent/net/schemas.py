@@ -95,7 +95,8 @@ class TruthPayload(TypedDict, total=False):
     targets: Annotated[list[TargetTruth], msgspec.Meta(max_length=MAX_TARGETS)]
     uavs: Annotated[dict[str, Vec3], msgspec.Meta(max_length=MAX_PEERS)]
     fire: NotRequired[Generic]  # agent.net.fire_truth validates it (bad_fire)
-    decoys: NotRequired[list[Any]]  # advisory: malformed entries are ignored (agent.sensors.truth)
+    #: advisory ``[north, east, probability]``: malformed entries are ignored (agent.sensors.truth)
+    decoys: NotRequired[list[list[float | bool | str | None]]]
 
 
 @dataclass(frozen=True)
