@@ -83,13 +83,12 @@ def decode_trajectory(d, model: TrajectoryModel) -> Trajectory:
     if y.shape != (L * n,) or diag.shape != (L, n, n) or off.shape != (L - 1, n, n):
         raise DecodeError("bad_shape", f"y {y.shape}, diag {diag.shape}, off {off.shape} for n={n}, L={L}")
     _check_finite(y, diag, off)
-    Y = np.zeros((L * n, L * n))
-    for k in range(L):
-        Y[k * n : (k + 1) * n, k * n : (k + 1) * n] = diag[k]
-    for k in range(L - 1):
-        Y[(k + 1) * n : (k + 2) * n, k * n : (k + 1) * n] = off[k]
-        Y[k * n : (k + 1) * n, (k + 1) * n : (k + 2) * n] = off[k].T
-    return Trajectory(y, _information_matrix(Y), d["epoch"], model)
+    blocks = np.zeros((L, n, L, n))  # blocks[i, :, j, :] = Y[i*n:(i+1)*n, j*n:(j+1)*n]
+    k = np.arange(L)
+    blocks[k, :, k, :] = diag
+    blocks[k[1:], :, k[:-1], :] = off
+    blocks[k[:-1], :, k[1:], :] = off.transpose(0, 2, 1)
+    return Trajectory(y, _information_matrix(blocks.reshape(L * n, L * n)), d["epoch"], model)
 
 
 def _expect_keys(d, keys: set[str]) -> None:
@@ -106,19 +105,25 @@ def _float_array(value, name: str) -> np.ndarray:
 
 
 def _check_finite(*arrays: np.ndarray) -> None:
-    if not all(np.all(np.isfinite(a)) for a in arrays):
-        raise DecodeError("non_finite", "NaN or inf in a belief")
+    """One reduction per array: a sum is finite when every term is (a non-finite sum of finite terms, an
+    overflow, is looked at element by element)."""
+    with np.errstate(all="ignore"):
+        if all(np.isfinite(a.sum()) or np.isfinite(a).all() for a in arrays):
+            return
+    raise DecodeError("non_finite", "NaN or inf in a belief")
 
 
 def _information_matrix(Y: np.ndarray) -> np.ndarray:
-    """Symmetric to SYMMETRY_RTOL and PSD to ``validation.PSD_RTOL``; returned exactly symmetric."""
+    """Symmetric to SYMMETRY_RTOL and PSD to ``validation.PSD_RTOL`` (one Cholesky factorisation when it is
+    definite, :func:`fusion.validation.is_psd`); returned exactly symmetric. ``Y`` holds finite values."""
     with np.errstate(all="ignore"):
-        scale = max(1.0, float(np.max(np.abs(Y))))
-        if not np.all(np.abs(Y - Y.T) <= SYMMETRY_RTOL * scale):
+        asymmetry = Y - Y.T
+        scale = max(1.0, float(np.abs(Y).max()))
+        if float(np.abs(asymmetry).max()) > SYMMETRY_RTOL * scale:
             raise DecodeError("indefinite", "information matrix is not symmetric")
         Y = 0.5 * (Y + Y.T)
         try:
-            psd = np.all(np.isfinite(Y)) and validation.is_psd(Y)
+            psd = validation.is_psd(Y)
         except np.linalg.LinAlgError:
             psd = False
     if not psd:
