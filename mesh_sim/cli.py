@@ -1,7 +1,8 @@
 """The ``skymesh`` command line.
 
 * ``skymesh bench NAME [--quick] [--json PATH]`` — run a benchmark of :data:`mesh_sim.bench.BENCHMARKS`
-  and print its tables (optionally writing the result as JSON);
+  and print its tables (optionally writing the result as JSON); ``skymesh bench scale [--sensor bearing|camera]
+  [--sizes 8,16,32]`` — the options of :data:`BENCH_OPTIONS`, for the benchmarks that take them;
 * ``skymesh bench --list`` — list the benchmarks;
 * ``skymesh run [--scenario NAME|FILE] [--agents N] [--duration S] [--speed X] [--seed K] [--out DIR]
   [--policy P] [--rerun save|spawn|connect:URL|off] [--camera uavK=SOURCE ...]`` — a team of agent processes
@@ -27,10 +28,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from agent.beliefs.tracking_config import POLICIES
+from agent.sensors.registry import SENSORS
 from mesh_sim.bench import BENCHMARKS
 from mesh_sim.bench.common import make_console, write_json
 
 EXIT_USAGE = 2
+BENCH_OPTIONS = ("sizes", "sensor")  # benchmark options beyond --quick and --json, for the benchmarks naming them
 
 
 def _positive_int(text: str) -> int:
@@ -38,6 +41,14 @@ def _positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
     return value
+
+
+def _sizes(text: str) -> tuple[int, ...]:
+    """``"8,16,32"`` -> ``(8, 16, 32)``: comma-separated positive integers."""
+    parts = [part.strip() for part in text.split(",")]
+    if not all(part.isdigit() and int(part) >= 1 for part in parts):
+        raise argparse.ArgumentTypeError(f"must be positive integers separated by commas, e.g. 8,16,32; got {text!r}")
+    return tuple(int(part) for part in parts)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -52,6 +63,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--quick", action="store_true", help="fewer, shorter repeats: seconds instead of minutes")
     bench.add_argument("--json", metavar="PATH", type=Path, help="also write the result as JSON to PATH")
     bench.add_argument("--repeats", type=_positive_int, help=argparse.SUPPRESS)  # tests: make --quick quicker
+    bench.add_argument("--sizes", type=_sizes, metavar="N,N,...",
+                       help="scale: the team sizes to run, e.g. 8,16,32,40,48 (default: each sensor's own)")
+    bench.add_argument("--sensor", choices=sorted(SENSORS), help="scale: measure this sensor only (default: each)")
 
     for name, text in (("run", "run a team of agents on a scenario"), ("demo", "run the default scenario")):
         run = commands.add_parser(name, help=text, description=text)
@@ -128,7 +142,15 @@ def _bench(args) -> int:
         )
         return EXIT_USAGE
     bench = BENCHMARKS[args.name]
-    result = bench.run(quick=args.quick, repeats=args.repeats)
+    options = {name: value for name in BENCH_OPTIONS if (value := getattr(args, name, None)) is not None}
+    refused = [f"--{name}" for name in options if name not in bench.options]
+    if refused:
+        takes = ", ".join(sorted(n for n, b in BENCHMARKS.items() if set(b.options) & set(options)))
+        print(f"skymesh bench {args.name}: {' and '.join(refused)} {'is' if len(refused) == 1 else 'are'} not "
+              "an option of this benchmark"
+              + (f" (only of: {takes})" if takes else ""), file=sys.stderr)
+        return EXIT_USAGE
+    result = bench.run(quick=args.quick, repeats=args.repeats, **options)
     bench.report(result, console)
     if args.json is not None:
         console.print(f"JSON written to {write_json(args.json, result)}", highlight=False)

@@ -6,6 +6,10 @@ recording, each as ``python -m ...`` (never by forking this process). It shows p
 everything on completion, on Ctrl-C and as soon as a child dies: SIGTERM by PID, then SIGKILL by PID
 after a grace period. Every child also exits by itself if the launcher disappears.
 
+Start-up is measured in the running system: each child's seconds from its spawn to its ready file (created
+once it has imported its modules, built its state and opened its Zenoh session) are in
+:attr:`RunOutcome.startup_s`, by child name.
+
 The run folder holds ``scenario.json`` (the effective scenario), ``logs/``, each process's own
 metrics, the merged ``metrics.json``, ``recording.rrd`` and ``plots/``.
 """
@@ -42,6 +46,7 @@ class Child:
     role: str  # "agent", "world" or "observer"
     process: subprocess.Popen
     log_path: Path
+    started: float  # wall time just before the spawn [s since the Unix epoch]
 
 
 @dataclass
@@ -50,6 +55,7 @@ class RunOutcome:
     status: str  # "completed", "interrupted" or "failed: <why>"
     metrics: dict = field(default_factory=dict)
     pids: dict = field(default_factory=dict)
+    startup_s: dict = field(default_factory=dict)  # child name -> seconds from its spawn to its ready file
 
 
 def free_port() -> int:
@@ -82,6 +88,7 @@ class Launcher:
         self.fleet = f"{scenario.name}-{uuid.uuid4().hex[:8]}"
         self.cameras = dict(cameras or {})  # agent name -> OpenCV video source replacing its synthetic camera
         self.children: list[Child] = []
+        self.startup_s: dict[str, float] = {}
 
     # -- lifecycle --------------------------------------------------------------------------------
     def run(self) -> RunOutcome:
@@ -101,7 +108,8 @@ class Launcher:
             self._stop_all()
             router.close()
         metrics = results.collect(self.run_dir, self.scenario, status, self.speed)
-        return RunOutcome(self.run_dir, status, metrics, {c.name: c.process.pid for c in self.children})
+        return RunOutcome(self.run_dir, status, metrics, {c.name: c.process.pid for c in self.children},
+                          dict(self.startup_s))
 
     @property
     def _epoch_file(self) -> Path:
@@ -122,6 +130,7 @@ class Launcher:
             if time.time() > deadline:
                 return f"failed: not every process was ready within {READY_TIMEOUT_S:.0f} s"
             time.sleep(0.05)
+        self.startup_s = {c.name: self._ready_file(c.name).stat().st_mtime - c.started for c in timed}
         epoch = time.time() + START_DELAY_S
         tmp = self._epoch_file.with_suffix(".tmp")
         tmp.write_text(repr(epoch))
@@ -153,10 +162,11 @@ class Launcher:
 
     def _spawn(self, name: str, role: str, args: list[str]) -> None:
         log_path = self.run_dir / "logs" / f"{name}.log"
+        started = time.time()
         with open(log_path, "wb") as log:
             proc = subprocess.Popen([sys.executable, *args], stdout=log, stderr=subprocess.STDOUT,
                                     stdin=subprocess.DEVNULL, env=self.env)
-        self.children.append(Child(name, role, proc, log_path))
+        self.children.append(Child(name, role, proc, log_path, started))
 
     def _monitor(self, epoch: float) -> str:
         """Wait for the agents to finish; return the run's status."""

@@ -48,7 +48,6 @@ seen from 80 m). Needle-thin ellipses are worse: up to ~0.15 at an axis ratio of
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from numbers import Real
 
 import cv2
@@ -56,6 +55,7 @@ import numpy as np
 
 from fusion.unscented import default_kappa, sigma_points
 from perception.camera import Intrinsics
+from perception.grid_sensor_model import PoseNoise
 from perception.pose import CameraPose
 from perception.rotations import rotation_from_euler
 
@@ -104,25 +104,6 @@ def _stencil() -> tuple[np.ndarray, np.ndarray]:
 
 
 _NODES, _WEIGHTS = _stencil()
-
-
-def _sigma(value, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, Real) or not math.isfinite(value) or value < 0:
-        raise ValueError(f"pose noise: {name} must be a finite number >= 0, got {value!r}")
-    return float(value)
-
-
-@dataclass(frozen=True)
-class PoseNoise:
-    """Standard deviations of the camera pose error. Defaults chosen here (Merino gives none): a
-    GPS-grade position and an AHRS-grade attitude, as :class:`perception.uncertainty.GeolocationNoise`."""
-
-    position_sigma: float = 1.0  # m, per NED axis (chosen here)
-    attitude_sigma: float = math.radians(1.0)  # rad, roll / pitch / yaw (chosen here)
-
-    def __post_init__(self):
-        object.__setattr__(self, "position_sigma", _sigma(self.position_sigma, "position_sigma"))
-        object.__setattr__(self, "attitude_sigma", _sigma(self.attitude_sigma, "attitude_sigma"))
 
 
 def check_cells(cells_ned: np.ndarray, cell_size: float | None = None) -> np.ndarray:

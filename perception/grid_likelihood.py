@@ -37,7 +37,8 @@ from numbers import Real
 import numpy as np
 
 from perception.camera import Intrinsics
-from perception.cell_projection import PoseNoise, check_cells, check_pose, mask_expectation, project_cells
+from perception.cell_projection import check_cells, check_pose, mask_expectation, project_cells
+from perception.grid_sensor_model import DetectionModel, PoseNoise
 from perception.pose import CameraPose
 
 __all__ = [
@@ -56,46 +57,6 @@ __all__ = [
 #: Likelihood of either hypothesis on a background pixel for a camera without negative information
 #: (Merino §6.5: "p(z|F_k) = 0.5 for both hypotheses").
 NO_NEGATIVE_LIKELIHOOD = 0.5
-
-
-def _probability(value, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, Real) or not 0.0 < value < 1.0:
-        raise ValueError(f"detection model: {name} must be a probability in (0, 1), got {value!r}")
-    return float(value)
-
-
-@dataclass(frozen=True)
-class DetectionModel:
-    """Per-pixel (or per-reading) detection probabilities and their range fall-off, Merino (4.9)-(4.15).
-    The thesis gives no values: all defaults are chosen here."""
-
-    pd: float = 0.9  # P_D = p(detect | fire) (chosen here; thesis gives none)
-    pf: float = 0.05  # P_F = p(detect | no fire) (chosen here)
-    d_max: float = 400.0  # m: range at which P_D = P_F = 0.5, (4.14)-(4.15) (chosen here)
-    negative: bool = True  # non-detections are evidence (4.10)/(4.13); False = visual camera of §6.5
-
-    def __post_init__(self):
-        pd, pf = _probability(self.pd, "pd"), _probability(self.pf, "pf")
-        if pd <= pf:
-            raise ValueError(f"detection model: pd must exceed pf (an informative detector), got pd={pd}, pf={pf}")
-        d_max = self.d_max
-        if isinstance(d_max, bool) or not isinstance(d_max, Real) or not math.isfinite(d_max) or d_max <= 0:
-            raise ValueError(f"detection model: d_max must be a finite range > 0 (m), got {d_max!r}")
-        if not isinstance(self.negative, bool | np.bool_):
-            raise ValueError(f"detection model: negative must be a bool, got {self.negative!r}")
-        object.__setattr__(self, "pd", pd)
-        object.__setattr__(self, "pf", pf)
-        object.__setattr__(self, "d_max", float(d_max))
-        object.__setattr__(self, "negative", bool(self.negative))
-
-    def at_range(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(P_D(d), P_F(d))`` by (4.14)-(4.15), ``P [1 - ρ²] + 0.5 ρ²`` with ``ρ = min(d / d_max, 1)``:
-        exactly 0.5 / 0.5 at and beyond ``d_max``. ``d`` must be finite and >= 0."""
-        d = np.asarray(d, dtype=float)
-        if not np.all(np.isfinite(d)) or np.any(d < 0):
-            raise ValueError("range d must be finite and >= 0 (m)")
-        rho2 = np.minimum(d / self.d_max, 1.0) ** 2
-        return self.pd * (1.0 - rho2) + 0.5 * rho2, self.pf * (1.0 - rho2) + 0.5 * rho2
 
 
 #: Default detection model and pose noise of :func:`camera_cell_evidence`.

@@ -10,7 +10,8 @@ A frame is built in layers, all from the camera's pinhole projection (:mod:`perc
 3. targets and occluders, far to near (painter's order): a ``"sphere"`` (a ball; apparent radius
    ``f·tan(asin(r/d))``) or a ``"disc"`` lying flat (its projected outline, an ellipse);
 4. smoke: soft semi-transparent gray puffs, drawn over everything (opaque in RGB, faint in IR);
-5. degradations (:mod:`perception.degradation`): noise, banding, speckles, failure.
+5. degradations (:mod:`perception.degradation`, applied by :mod:`perception.degrade`): noise, banding,
+   speckles, failure.
 
 Labels: for every target its pixel centre, depth, apparent radius, whether it is in view, the
 fraction of its pixels left visible by occluders, and ``visible`` = in view, at least half
@@ -26,7 +27,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from perception.degradation import Degradation, degrade
+from perception.degradation import Degradation
+from perception.degrade import degrade
 from perception.ground import GroundTexture, render_ground
 from perception.pinhole import PinholeView, as_view
 from perception.scene import Fire, Occluder, RenderedFrame, Smoke, Target, TargetLabel, parse

@@ -3,6 +3,9 @@
 ``EXCHANGES`` maps a wire kind to a builder that returns the exchange when the scenario asks for it
 (``None`` otherwise): tracks always, a grid with a ``[grid]`` section. Adding a belief kind is one module
 in this folder plus one line here.
+
+A builder imports its exchange's module only when the scenario asks for it if that module is heavy: the grid
+brings a thermal camera (OpenCV, scipy.ndimage), which an agent without a ``[grid]`` never loads (issue 12).
 """
 
 from __future__ import annotations
@@ -12,7 +15,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from agent.beliefs.flood import FloodExchange
-from agent.beliefs.grids import GridExchange
 from agent.beliefs.tracks import TrackExchange
 from agent.net.sending import SendScheduler
 from agent.plugins import BeliefExchange, Outbox
@@ -40,10 +42,12 @@ def _tracks(ctx: ExchangeContext) -> TrackExchange:
     return TrackExchange(*args)
 
 
-def _grid(ctx: ExchangeContext) -> GridExchange | None:
+def _grid(ctx: ExchangeContext) -> BeliefExchange | None:
     sc = ctx.scenario
     if sc.grid is None:
         return None
+    from agent.beliefs.grids import GridExchange  # the thermal camera's image code, only for a [grid]
+
     return GridExchange(ctx.me, sc.grid, sc.area.as_tuple(), ctx.terrain, ctx.seed + 7919, ctx.outbox)
 
 

@@ -7,11 +7,11 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from agent.sensors.fire_camera import FireCameraConfig
+from agent.sensors.fire_camera_config import FireCameraConfig
 from fusion.channel_filter import Policy
 from fusion.grid_geometry import GridGeometry
 from fusion.grid_layers import BELIEFS
-from perception.grid_likelihood import DetectionModel, PoseNoise
+from perception.grid_sensor_model import DetectionModel, PoseNoise
 
 INTERSECTS = ("chernoff", "max", "half")
 

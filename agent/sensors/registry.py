@@ -6,7 +6,9 @@ configured by :mod:`agent.sensors.camera_config`).
 
 To add a sensor, write a module with a frozen config dataclass whose ``from_dict(d)`` reads the
 ``[sensor]`` table (rejecting unknown keys and bad values with the setting's name) and a sensor class,
-and add a :class:`SensorKind` line to :data:`SENSORS`.
+and add a :class:`SensorKind` line to :data:`SENSORS`. The config modules are imported here (every scenario
+is read with them); a sensor module that loads heavy libraries is imported by its factory, when an agent
+builds that sensor: the camera pipeline's OpenCV is never loaded by an agent with the geometric sensor.
 """
 
 from __future__ import annotations
@@ -15,7 +17,6 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from agent.sensors.bearing import BearingSensorConfig, GeometricBearingSensor
-from agent.sensors.camera import CameraSensor
 from agent.sensors.camera_config import CameraSensorConfig
 
 
@@ -29,9 +30,16 @@ def _geometric_bearing_sensor(config: BearingSensorConfig, seed: int, terrain=No
     return GeometricBearingSensor(config, seed)
 
 
+def _camera_sensor(config: CameraSensorConfig, seed: int, terrain=None, source=None):
+    """The camera pipeline (render or read, detect, bearings): OpenCV is loaded here, with the camera."""
+    from agent.sensors.camera import CameraSensor
+
+    return CameraSensor(config, seed, terrain, source)
+
+
 SENSORS: dict[str, SensorKind] = {
     "bearing": SensorKind(BearingSensorConfig, _geometric_bearing_sensor),
-    "camera": SensorKind(CameraSensorConfig, CameraSensor),
+    "camera": SensorKind(CameraSensorConfig, _camera_sensor),
 }
 DEFAULT_SENSOR = "bearing"
 

@@ -10,6 +10,10 @@ To add a benchmark, write a module in this package that defines
 
 and add a :class:`Benchmark` entry to :data:`BENCHMARKS`. Modules are imported only when their
 benchmark runs, so ``skymesh bench --list`` stays fast.
+
+A benchmark that takes more of the ``skymesh bench`` options (``--sizes``, ``--sensor``: see
+:data:`mesh_sim.cli.BENCH_OPTIONS`) names them in its entry's ``options``; its ``run`` receives them as keyword
+arguments when they are given, and the command line refuses them for any other benchmark.
 """
 
 from __future__ import annotations
@@ -23,12 +27,16 @@ class Benchmark:
     name: str
     module: str  # dotted path of the module that defines run() and report()
     description: str
+    options: tuple[str, ...] = ()  # the extra keyword options of its run() that the command line may pass
 
     def load(self):
         return importlib.import_module(self.module)
 
-    def run(self, quick: bool = False, repeats: int | None = None) -> dict:
-        return self.load().run(quick=quick, repeats=repeats)
+    def run(self, quick: bool = False, repeats: int | None = None, **options) -> dict:
+        unknown = sorted(set(options) - set(self.options))
+        if unknown:
+            raise TypeError(f"benchmark {self.name} takes no option {', '.join(unknown)}")
+        return self.load().run(quick=quick, repeats=repeats, **options)
 
     def report(self, result: dict, console=None) -> None:
         self.load().report(result, console)
@@ -46,8 +54,10 @@ BENCHMARKS: dict[str, Benchmark] = {
         Benchmark(
             "scale",
             "mesh_sim.bench.scale",
-            "live runs of the default scenario with N = 4, 8, 16, 32 agents: missed deadlines, CPU per step, memory, "
-            "belief latency; the largest N at 5 Hz with < 1 % misses",
+            "live runs of the default scenario with the bearing sensor (N = 8, 16, 32, 40, 48) and the camera "
+            "(N = 4, 8, 16, 24): missed deadlines, CPU per step, memory, start-up, belief latency; per sensor the "
+            "largest N at 5 Hz with < 1 % misses (--sensor bearing|camera, --sizes N,N,...)",
+            options=("sizes", "sensor"),
         ),
         Benchmark(
             "transport",

@@ -1,10 +1,14 @@
-"""``skymesh bench scale``: how many live agents one machine carries at the agent rate.
+"""``skymesh bench scale``: how many live agents one machine carries at the agent rate, per sensor.
 
 Live runs of the default scenario (``skymesh run`` without Rerun: ``rerun="off"``, ``speed=1.0``, so
-simulation seconds are wall seconds) with N = 4, 8, 16, 32 agents (``--quick``: N = 2, 4 and shorter
-runs). Every agent is its own OS process over the launcher's Zenoh router, plus the world process
-(truth and the centralized oracle). Full mode stops early once a size clearly fails (more than
-``STOP_MISS_SHARE`` of the steps missed, or the run did not complete).
+simulation seconds are wall seconds) for each sensor of ``SENSORS`` — the geometric bearing sensor
+(``[sensor] kind = "bearing"``) and the camera pipeline (the default scenario's ``kind = "camera"``:
+render, detect, bearings) — with its own sizes: N = 8, 16, 32, 40, 48 bearing agents and N = 4, 8, 16, 24
+camera agents (``--quick``: N = 2, 4 for each and shorter runs). ``--sensor bearing|camera`` measures one
+sensor only; ``--sizes 8,16,32`` replaces the sizes of every sensor measured. Every agent is its own OS
+process over the launcher's Zenoh router, plus the world process (truth and the centralized oracle). Full
+mode stops growing N for a sensor once a size clearly fails (more than ``STOP_MISS_SHARE`` of the steps
+missed, or the run did not complete).
 
 Per N, pooled over the agents (and over ``repeats`` runs per size, default one):
 
@@ -37,11 +41,15 @@ Start-up: simulation time 0 must not come before every process is ready, or the 
 skipped steps. On a 2-core machine an agent process needs about 0.5 s of wall time to import and open
 its session *while the others do the same* (measured: 16 concurrent imports of the agent and world
 modules took 8.2 s). The launcher releases simulation time 0 only once every process has said it is
-ready (its ``epoch`` file), so a slow start costs no steps.
+ready (its ``epoch`` file), so a slow start costs no steps. Each row gives the agents' start-up as the
+launcher measured it (:attr:`mesh_sim.launcher.RunOutcome.startup_s`: spawn to ready file, with every
+other process of the run starting at the same time): mean and max over the agents.
 
-CPU per step and latency are also given as ratios to the smallest N of the same run (the baseline).
-Goal: the largest N that runs at the agent rate with less than ``MISS_GOAL`` of its steps missed —
-every smaller size measured must pass as well (``goals["largest_N_under_1pct"]``; None if none).
+CPU per step and latency are also given as ratios to the smallest N of the same sensor (the baseline).
+Goals, per sensor: the largest N that runs at the agent rate with less than ``MISS_GOAL`` of its steps
+missed — every smaller size measured must pass as well (``goals["largest_N_under_1pct"][sensor]``; None
+if none) — against ``TARGET_N`` (issue 12: 40 bearing agents, 16 camera agents), and the PSS per agent
+at N = ``PSS_GOAL_N`` against ``PSS_GOAL_MB``.
 """
 
 from __future__ import annotations
@@ -60,10 +68,15 @@ from mesh_sim.bench import common
 NAME = "scale"
 SCENARIO = "default"
 SPEED = 1.0  # simulation seconds per wall second: live, real time
-FULL_SIZES = (4, 8, 16, 32)
-QUICK_SIZES = (2, 4)
+SENSORS = ("bearing", "camera")  # the [sensor] kinds measured, in this order
+FULL_SIZES = {"bearing": (8, 16, 32, 40, 48), "camera": (4, 8, 16, 24)}  # chosen around the goals below
+QUICK_SIZES = {"bearing": (2, 4), "camera": (2, 4)}
+TARGET_N = {"bearing": 40, "camera": 16}  # issue 12: agents one 2-core machine should carry at the agent rate
+PSS_GOAL_MB = 60.0  # issue 12: proportional set size per agent ...
+PSS_GOAL_N = 16  # ... at this team size
 FULL_DURATION_S = 30.0  # simulation seconds per run (chosen here)
-QUICK_DURATION_S = 8.0  # chosen here: two quick runs with start-up and shutdown stay well under a minute
+QUICK_DURATION_S = 5.0  # chosen here: a sensor's two quick runs, start-up and shutdown included, take under a minute
+# (measured: 54 s for the bearing sensor with 1.5 cores busy elsewhere); both sensors take twice that
 MISS_GOAL = 0.01  # share of missed steps, below which a size "runs at the agent rate" (from the issue)
 STOP_MISS_SHARE = 0.20  # full mode stops growing N once a size misses more than this (chosen here)
 MEMORY_PROBE_AT = 0.8  # PSS/USS are read once, at this fraction of the simulated duration (chosen here)
@@ -74,24 +87,29 @@ def run(
     repeats: int | None = None,
     *,
     sizes: Sequence[int] | None = None,
+    sensor: str | None = None,
     duration: float | None = None,
     runs_dir: str | os.PathLike | None = None,
     stop_early: bool | None = None,
     overrides: dict | None = None,
+    sensor_settings: dict | None = None,
 ) -> dict:
     """Run the benchmark.
 
-    ``repeats``: runs per size (default 1; their agents are pooled). ``sizes`` and ``duration``
-    (simulation seconds per run) override the mode's defaults. Run folders go to a temporary folder
-    removed afterwards, or under ``runs_dir`` when given (kept). ``stop_early`` (default: full mode
-    only) skips the larger sizes once a size misses more than ``STOP_MISS_SHARE`` of its steps.
-    ``overrides`` change the scenario like ``mesh_sim.scenario.load``'s keywords (e.g. the sensor)."""
+    ``sensor``: measure only this one of :data:`SENSORS` (default: each in turn). ``sizes``: the team sizes
+    of every sensor measured (default: the mode's sizes of each sensor). ``repeats``: runs per size
+    (default 1; their agents are pooled). ``duration``: simulation seconds per run (default: the mode's).
+    Run folders go to a temporary folder removed afterwards, or under ``runs_dir`` when given (kept).
+    ``stop_early`` (default: full mode only) skips a sensor's larger sizes once a size misses more than
+    ``STOP_MISS_SHARE`` of its steps. ``overrides`` change the scenario like ``mesh_sim.scenario.load``'s
+    keywords, except its ``[sensor]``: ``sensor_settings`` maps a sensor kind to extra ``[sensor]`` settings
+    (e.g. ``{"bearing": {"range": 400.0}}``)."""
     from mesh_sim.scenario import load
 
-    sizes = tuple(sizes if sizes is not None else QUICK_SIZES if quick else FULL_SIZES)
-    if not sizes or any(int(n) != n or n < 1 for n in sizes):
-        raise ValueError(f"sizes must be positive integers, got {sizes}")
-    sizes = tuple(sorted(int(n) for n in sizes))
+    if sensor is not None and sensor not in SENSORS:
+        raise ValueError(f"sensor must be one of {', '.join(SENSORS)}, got {sensor!r}")
+    sensors = SENSORS if sensor is None else (sensor,)
+    plan = {s: _sizes(sizes if sizes is not None else (QUICK_SIZES if quick else FULL_SIZES)[s]) for s in sensors}
     duration = float(duration if duration is not None else QUICK_DURATION_S if quick else FULL_DURATION_S)
     if not duration > 0:
         raise ValueError(f"duration must be positive, got {duration}")
@@ -100,43 +118,64 @@ def run(
         raise ValueError(f"repeats must be at least 1, got {repeats}")
     stop_early = (not quick) if stop_early is None else stop_early
     overrides = dict(overrides or {})
+    if "sensor" in overrides:
+        raise ValueError("choose the sensor with sensor= and its settings with sensor_settings=, not overrides")
+    sensor_settings = dict(sensor_settings or {})
+    if set(sensor_settings) - set(SENSORS):
+        raise ValueError(f"sensor_settings keys must be sensor kinds ({', '.join(SENSORS)}), "
+                         f"got {sorted(sensor_settings)}")
+    tables = {s: {"kind": s, **sensor_settings.get(s, {})} for s in sensors}
     base_scenario = load(SCENARIO, **overrides)
     rate_hz = base_scenario.agent.rate_hz
 
     rows: list[dict] = []
     load_before = os.getloadavg()
     folder = common.runs_folder(runs_dir, "skymesh-bench-scale-")
-    with folder as base, common.run_progress(NAME, len(sizes) * runs) as (console, advance):
+    total = sum(len(n) for n in plan.values()) * runs
+    with folder as base, common.run_progress(NAME, total) as (console, advance):
         launcher_console = console if console.is_terminal else Console(stderr=True, quiet=True)
-        for n in sizes:
-            outcomes = []
-            for r in range(runs):
-                advance(f"N={n}" + (f" run {r + 1}/{runs}" if runs > 1 else "") + f" ({duration:g} s)", 0)
-                outcomes.append(_one_run(load(SCENARIO, **{**overrides, "agents": n, "duration": duration}), base,
-                                         launcher_console))
-                if outcomes[-1]["status"] == "interrupted":  # Ctrl-C: the launcher stopped its run; stop here too
-                    raise KeyboardInterrupt
-                advance(f"N={n} done", 1)
-            rows.append(_summarise(n, rate_hz, outcomes))
-            if stop_early and (not rows[-1]["completed"] or rows[-1]["missed_share"] > STOP_MISS_SHARE):
-                break
-    _add_ratios(rows)
-    measured = [r["n"] for r in rows]
+        for kind, kind_sizes in plan.items():
+            kind_rows: list[dict] = []
+            for n in kind_sizes:
+                outcomes = []
+                for r in range(runs):
+                    label = f"{kind} N={n}" + (f" run {r + 1}/{runs}" if runs > 1 else "")
+                    advance(f"{label} ({duration:g} s)", 0)
+                    settings = {**overrides, "sensor": tables[kind], "agents": n, "duration": duration}
+                    outcomes.append(_one_run(load(SCENARIO, **settings), base, launcher_console))
+                    if outcomes[-1]["status"] == "interrupted":  # Ctrl-C: the launcher stopped its run; stop here too
+                        raise KeyboardInterrupt
+                    advance(f"{label} done", 1)
+                kind_rows.append({"sensor": kind, **_summarise(n, rate_hz, outcomes)})
+                if stop_early and (not kind_rows[-1]["completed"] or kind_rows[-1]["missed_share"] > STOP_MISS_SHARE):
+                    break
+            _add_ratios(kind_rows)
+            rows.extend(kind_rows)
+    measured = {kind: [r["n"] for r in rows if r["sensor"] == kind] for kind in sensors}
     return {
         "benchmark": NAME,
         "settings": {
-            "quick": quick, "scenario": SCENARIO, "sizes": list(sizes), "measured_sizes": measured,
-            "skipped_sizes": [n for n in sizes if n not in measured], "duration_s": duration,
-            "runs_per_size": runs, "speed": SPEED, "rate_hz": rate_hz, "miss_goal": MISS_GOAL,
+            "quick": quick, "scenario": SCENARIO, "sensors": list(sensors),
+            "sensor_tables": tables, "sizes": {k: list(v) for k, v in plan.items()}, "measured_sizes": measured,
+            "skipped_sizes": {k: [n for n in plan[k] if n not in measured[k]] for k in sensors},
+            "duration_s": duration, "runs_per_size": runs, "speed": SPEED, "rate_hz": rate_hz, "miss_goal": MISS_GOAL,
             "radio": base_scenario.raw.get("radio"),
             "stop_miss_share": STOP_MISS_SHARE if stop_early else None,
-            "startup": {"kind": "readiness handshake"},
+            "startup": {"kind": "readiness handshake", "measured": "per agent, from its spawn to its ready file"},
             "load_average_before": list(load_before), "load_average_after": list(os.getloadavg()),
         },
-        "environment": common.environment(("numpy", "scipy", "eclipse-zenoh", "msgpack")),
+        "environment": common.environment(("numpy", "scipy", "eclipse-zenoh", "msgpack", "opencv-python-headless")),
         "rows": rows,
-        "goals": _goals(rows),
+        "goals": _goals(rows, sensors),
     }
+
+
+def _sizes(sizes: Sequence[int]) -> tuple[int, ...]:
+    """Team sizes as sorted distinct positive integers (a ValueError names a bad one)."""
+    sizes = tuple(sizes)
+    if not sizes or any(isinstance(n, bool) or int(n) != n or n < 1 for n in sizes):
+        raise ValueError(f"sizes must be positive integers, got {sizes}")
+    return tuple(sorted({int(n) for n in sizes}))
 
 
 def _one_run(scenario, base: Path, console: Console) -> dict:
@@ -145,7 +184,7 @@ def _one_run(scenario, base: Path, console: Console) -> dict:
 
     from mesh_sim.launcher import Launcher, new_run_dir
 
-    run_dir = new_run_dir(base, f"{NAME}-n{scenario.agent.agents}")
+    run_dir = new_run_dir(base, f"{NAME}-{scenario.agent.sensor.kind}-n{scenario.agent.agents}")
     launcher = Launcher(scenario, run_dir, speed=SPEED, rerun="off", console=console)
     times0, machine0, wall0 = os.times(), psutil.cpu_times(), time.time()
     probe = _MemoryProbe(launcher, MEMORY_PROBE_AT * scenario.agent.duration / SPEED)
@@ -163,6 +202,8 @@ def _one_run(scenario, base: Path, console: Console) -> dict:
         "children_cpu_s": children_cpu, "machine_busy": 1.0 - idle / total if total > 0 else math.nan,
         "self_cpu_s": (times1.user - times0.user) + (times1.system - times0.system),
         "pss_mb": probe.pss_mb, "uss_mb": probe.uss_mb,
+        "agent_startup_s": [outcome.startup_s[c.name] for c in launcher.children
+                            if c.role == "agent" and c.name in outcome.startup_s],
     }
 
 
@@ -225,6 +266,7 @@ def _summarise(n: int, rate_hz: float, outcomes: list[dict]) -> dict:
     rss = [a["rss_mb"] for a in ran if a.get("rss_mb") is not None]
     pss = [m for o in outcomes for m in o["pss_mb"]]
     uss = [m for o in outcomes for m in o["uss_mb"]]
+    startup = [v for o in outcomes for v in o["agent_startup_s"]]
     fleets = [o["metrics"].get("fleet", {}) for o in outcomes]
     rmse = [f["rmse"] for f in fleets if f.get("rmse") is not None]
     rmse_ratio = [f["rmse_ratio_to_oracle"] for f in fleets if f.get("rmse_ratio_to_oracle") is not None]
@@ -260,6 +302,8 @@ def _summarise(n: int, rate_hz: float, outcomes: list[dict]) -> dict:
         "pss_mb": _mean(pss),
         "uss_mb": _mean(uss),
         "memory_probed_agents": len(pss),
+        "startup_mean_s": _mean(startup),
+        "startup_max_s": max(startup, default=math.nan),
         "latency_mean_ms": 1e3 * lat_mean,
         "latency_p95_ms": 1e3 * max(p95s, default=math.nan),
         "beliefs_fused": sum(x.get("count", 0) for x in lat),
@@ -297,20 +341,47 @@ def _add_ratios(rows: list[dict]) -> None:
             row[f"{key}_ratio"] = row[key] / base[key] if base[key] and math.isfinite(base[key]) else math.nan
 
 
-def _goals(rows: list[dict]) -> dict:
-    passing = None
+def _goals(rows: list[dict], sensors: Sequence[str]) -> dict:
+    """Per sensor: the largest N passing (it and every smaller size measured under ``MISS_GOAL``) against
+    ``TARGET_N``, and the PSS per agent at ``PSS_GOAL_N`` against ``PSS_GOAL_MB``. A goal whose size was not
+    measured is ``None``, neither met nor missed."""
     for row in rows:
         row["meets_goal"] = bool(row["completed"] and row["missed_share"] < MISS_GOAL)
-    for row in rows:  # sizes ascending: the largest N such that it and every smaller size pass
-        if not row["meets_goal"]:
-            break
-        passing = row["n"]
+    per_sensor = {}
+    for kind in sensors:
+        kind_rows = [r for r in rows if r["sensor"] == kind]
+        passing = None
+        for row in kind_rows:  # sizes ascending: the largest N such that it and every smaller size pass
+            if not row["meets_goal"]:
+                break
+            passing = row["n"]
+        target = TARGET_N[kind]
+        if passing is not None and passing >= target:
+            meets_target = True
+        elif any(not r["meets_goal"] for r in kind_rows if r["n"] <= target):
+            meets_target = False
+        else:
+            meets_target = None  # every size measured passed, but none reached the target
+        at = next((r for r in kind_rows if r["n"] == PSS_GOAL_N), None)
+        pss = at["pss_mb"] if at is not None and math.isfinite(at["pss_mb"]) else None
+        per_sensor[kind] = {
+            "largest_N_under_1pct": passing,
+            "target_N": target,
+            "meets_target_N": meets_target,
+            f"pss_mb_at_N{PSS_GOAL_N}": pss,
+            "pss_meets_goal": None if pss is None else pss <= PSS_GOAL_MB,
+            "results": [{"n": r["n"], "missed_share": r["missed_share"], "pass": r["meets_goal"]} for r in kind_rows],
+        }
     return {
-        "largest_N_under_1pct": passing,
-        "description": f"largest N whose live run keeps every agent at its rate with < {MISS_GOAL:.0%} of steps "
-        "missed (late or skipped), every smaller size passing too",
+        "largest_N_under_1pct": {kind: g["largest_N_under_1pct"] for kind, g in per_sensor.items()},
+        "description": f"per sensor, the largest N whose live run keeps every agent at its rate with < {MISS_GOAL:.0%} "
+        f"of steps missed (late or skipped), every smaller size passing too, against the target N; and the PSS per "
+        f"agent at N = {PSS_GOAL_N} against {PSS_GOAL_MB:g} MB",
         "target_max_missed_share": MISS_GOAL,
-        "results": [{"n": r["n"], "missed_share": r["missed_share"], "pass": r["meets_goal"]} for r in rows],
+        "target_N": {kind: TARGET_N[kind] for kind in sensors},
+        "pss_goal_mb": PSS_GOAL_MB,
+        "pss_goal_n": PSS_GOAL_N,
+        "per_sensor": per_sensor,
     }
 
 
@@ -330,21 +401,40 @@ def _radio(radio) -> str:
 
 
 def report(result: dict, console=None) -> None:
-    """Print the table and the goal of a :func:`run` result."""
+    """Print a table per sensor and the goals of a :func:`run` result."""
     console = console or common.make_console()
     s, env = result["settings"], result["environment"]
     console.print(
-        f"[bold]{NAME}[/bold]  {'quick' if s['quick'] else 'full'} run: live '{s['scenario']}' scenario, "
-        f"{s['duration_s']:g} s at speed {s['speed']:g} (wall = sim time), agents at {s['rate_hz']:g} Hz, "
-        f"{s['runs_per_size']} run(s) per size, Rerun off, radio {_radio(s.get('radio'))}, start-up: "
-        f"{(s.get('startup') or {}).get('kind', '?')}.  "
-        f"{common.machine_line(env, {'zenoh': 'eclipse-zenoh'})}.  Load average before/after: "
-        f"{s['load_average_before'][0]:.2f} / {s['load_average_after'][0]:.2f}",
+        f"[bold]{NAME}[/bold]  {'quick' if s['quick'] else 'full'} run: live '{s['scenario']}' scenario, sensors "
+        f"{', '.join(s['sensors'])}, {s['duration_s']:g} s at speed {s['speed']:g} (wall = sim time), agents at "
+        f"{s['rate_hz']:g} Hz, {s['runs_per_size']} run(s) per size, Rerun off, radio {_radio(s.get('radio'))}, "
+        f"start-up: {(s.get('startup') or {}).get('kind', '?')}.  "
+        f"{common.machine_line(env, {'zenoh': 'eclipse-zenoh', 'opencv': 'opencv-python-headless'})}.  "
+        f"Load average before/after: {s['load_average_before'][0]:.2f} / {s['load_average_after'][0]:.2f}",
         highlight=False,
     )
-    base = result["rows"][0]["n"] if result["rows"] else None
+    for kind in s["sensors"]:
+        _report_sensor(console, kind, [r for r in result["rows"] if r["sensor"] == kind], s)
+    g = result["goals"]
+    for kind, goal in g["per_sensor"].items():
+        largest, target = goal["largest_N_under_1pct"], goal["target_N"]
+        pss = goal[f"pss_mb_at_N{g['pss_goal_n']}"]
+        pss_text = (f"PSS per agent at N = {g['pss_goal_n']}: [bold]{pss:.0f} MB[/bold] "
+                    f"(goal <= {g['pss_goal_mb']:g} MB)" if pss is not None
+                    else f"PSS at N = {g['pss_goal_n']}: not measured")
+        console.print(
+            f"{common.verdict(goal['meets_target_N'])}  {kind}: largest N at {s['rate_hz']:g} Hz with "
+            f"< {MISS_GOAL:.0%} missed steps: [bold]{largest if largest else 'none'}[/bold] (target {target}; of N = "
+            f"{', '.join(map(str, s['measured_sizes'][kind])) or 'none'} measured)",
+            highlight=False,
+        )
+        console.print(f"{common.verdict(goal['pss_meets_goal'])}  {kind}: {pss_text}", highlight=False)
+
+
+def _report_sensor(console, kind: str, rows: list[dict], s: dict) -> None:
+    base = rows[0]["n"] if rows else None
     table_rows = []
-    for r in result["rows"]:
+    for r in rows:
         table_rows.append([
             r["n"],
             "[green]completed[/green]" if r["completed"] else f"[red]{r['status']}[/red]",
@@ -356,13 +446,14 @@ def report(result: dict, console=None) -> None:
             _fmt(r["run_cpu_cores"], ".2f"),
             f"{_fmt(100 * r['machine_busy'], '.0f', ' %')} / {_fmt(r['other_cpu_cores'], '.2f')}",
             f"{_fmt(r['rss_mb'], '.0f')}/{_fmt(r['pss_mb'], '.0f')}/{_fmt(r['uss_mb'], '.0f')}",
+            f"{_fmt(r['startup_mean_s'], '.1f')} / {_fmt(r['startup_max_s'], '.1f')}",
             f"{_fmt(r['latency_mean_ms'], '.0f')} ({common.fmt_ratio(r['latency_mean_ms_ratio'])})",
             _fmt(r["latency_p95_ms"], ".0f"),
             f"{_fmt(r['fleet_rmse_m'], '.2f')} ({_fmt(r['rmse_ratio_to_oracle'], '.2f', 'x')})",
             r["world_missed"],
             common.verdict(r.get("meets_goal")),
         ])
-    skipped = s.get("skipped_sizes") or []
+    skipped = (s.get("skipped_sizes") or {}).get(kind) or []
     caption = "\n".join([
         "missed = (late + skipped steps) / steps due; late = finished after the next step was due; skipped = never "
         "ran (the agent jumped ahead); start-up lateness included.",
@@ -371,6 +462,8 @@ def report(result: dict, console=None) -> None:
         "Machine busy: whole machine; others: cores used meanwhile by processes outside the run.",
         "Memory per agent: peak RSS (counts Zenoh shared-memory segments mapped from peers) / PSS / USS at "
         f"{MEMORY_PROBE_AT:.0%} of the run.",
+        "Start-up: seconds from an agent's spawn to its ready file (imports, agent built, Zenoh session open), every "
+        "process of the run starting at once: mean / max over the agents.",
         "Latency: receiving step time - stamp (quantised to the 200 ms step; mean pooled, p95 of the worst agent), "
         f"ratio to N={base}. RMSE: fleet, pooled (÷ centralized oracle).",
         "World missed: late + skipped ticks of the world/oracle process (10 Hz).",
@@ -379,16 +472,10 @@ def report(result: dict, console=None) -> None:
         caption += f"\nNot run (an earlier size missed > {s['stop_miss_share']:.0%} or failed): N = " + ", ".join(
             map(str, skipped))
     common.print_table(
-        console, f"Live scale: missed deadlines, CPU, memory and latency vs N (baseline N={base})",
+        console,
+        f"Live scale, {kind} sensor: missed deadlines, CPU, memory, start-up and latency vs N (baseline N={base})",
         ["N", ("run", "left"), "steps due", "missed", "late / skip", "CPU/step ms (×)", "agent loops", "run CPU",
-         "busy / others", "RSS/PSS/USS MB", "latency ms (×)", "p95 ms", "RMSE m (÷ oracle)", "world missed",
-         f"< {MISS_GOAL:.0%}"],
+         "busy / others", "RSS/PSS/USS MB", "start-up s", "latency ms (×)", "p95 ms", "RMSE m (÷ oracle)",
+         "world missed", f"< {MISS_GOAL:.0%}"],
         table_rows, caption,
-    )
-    g = result["goals"]
-    console.print(
-        f"{common.verdict(g['largest_N_under_1pct'] is not None)}  largest N at {s['rate_hz']:g} Hz with "
-        f"< {MISS_GOAL:.0%} missed steps: [bold]{g['largest_N_under_1pct'] if g['largest_N_under_1pct'] else 'none'}"
-        f"[/bold] (of N = {', '.join(map(str, s['measured_sizes']))} measured)",
-        highlight=False,
     )

@@ -85,3 +85,43 @@ def test_bad_arguments_exit_2(argv):
     with pytest.raises(SystemExit) as excinfo:
         cli.main(argv)
     assert excinfo.value.code == 2
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["bench", "scale", "--sizes", "0,8"], "--sizes: must be positive integers"),
+    (["bench", "scale", "--sizes", "8,,16"], "--sizes: must be positive integers"),
+    (["bench", "scale", "--sizes", "eight"], "--sizes: must be positive integers"),
+    (["bench", "scale", "--sensor", "lidar"], "--sensor: invalid choice: 'lidar'"),
+])
+def test_bad_scale_options_exit_2_and_say_why(argv, message, capsys):
+    with pytest.raises(SystemExit) as excinfo:
+        cli.main(argv)
+    assert excinfo.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_scale_options_are_refused_by_other_benchmarks(monkeypatch, capsys):
+    monkeypatch.setattr(fusion_ops, "run", lambda **kwargs: pytest.fail("the benchmark must not run"))
+    assert cli.main(["bench", "fusion-ops", "--quick", "--sizes", "2"]) == 2
+    assert "--sizes is not an option of this benchmark (only of: scale)" in capsys.readouterr().err
+
+
+def test_scale_options_reach_the_benchmark(monkeypatch, tmp_path):
+    from mesh_sim.bench import scale
+
+    seen = {}
+
+    def fake_run(**kwargs):
+        seen.update(kwargs)
+        return {"benchmark": "scale", "rows": [], "goals": {}}
+
+    monkeypatch.setattr(scale, "run", fake_run)
+    monkeypatch.setattr(scale, "report", lambda result, console=None: None)
+    path = tmp_path / "scale.json"
+    assert cli.main(["bench", "scale", "--quick", "--sizes", "8,16,32,40,48", "--sensor", "bearing",
+                     "--json", str(path)]) == 0
+    assert seen == {"quick": True, "repeats": None, "sizes": (8, 16, 32, 40, 48), "sensor": "bearing"}
+    assert json.loads(path.read_text())["benchmark"] == "scale"
+    seen.clear()
+    assert cli.main(["bench", "scale", "--quick"]) == 0
+    assert seen == {"quick": True, "repeats": None}  # no option given: the benchmark's defaults (every sensor)
