@@ -90,6 +90,7 @@ class Increment:
     arrived: float
     last_sent: float | None = None
     holders: set[str] = field(default_factory=set)  # neighbours known to hold it (they sent it to us)
+    settled: frozenset[str] | None = None  # a neighbour set that was found to hold it all (holding only grows)
 
 
 class FloodRelay:
@@ -146,10 +147,14 @@ class FloodRelay:
         """The increments to broadcast now (see the module docstring), oldest first."""
         self._expire(now)
         neighbours = list(neighbours)
+        everyone = frozenset(neighbours)
         out = []
         for inc in self._held.values():
+            if inc.settled == everyone:  # every current neighbour holds it: nothing to check (O(1) per step)
+                continue
             missing = [p for p in neighbours if not self._holds(p, inc)]
             if not missing:
+                inc.settled = everyone
                 continue
             if inc.last_sent is not None:
                 if now - inc.last_sent >= self.ack_timeout - 1e-9:
