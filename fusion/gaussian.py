@@ -36,12 +36,13 @@ class Gaussian:
     """A Gaussian belief ``(y, Y)`` in information form. Construct with :meth:`from_moments`,
     :meth:`from_info` or :meth:`zeros`; the constructor itself trusts its arguments."""
 
-    __slots__ = ("y", "Y")
+    __slots__ = ("y", "Y", "_mean", "_cov")
     epoch = None  # a timeless belief: it never needs aligning before the algebra (see ChannelFilter)
 
     def __init__(self, y: np.ndarray, Y: np.ndarray):
         self.y = y
         self.Y = Y
+        self._mean = self._cov = None  # the moments, computed once (a belief is immutable): copies are handed out
 
     # -- construction ---------------------------------------------------------------------------
     @classmethod
@@ -78,13 +79,17 @@ class Gaussian:
     @property
     def mean(self) -> np.ndarray:
         """``mu = Y^-1 y``; raises :class:`UninformativeBeliefError` if ``Y`` is singular."""
-        return self._solve(self.y)
+        if self._mean is None:
+            self._mean = self._solve(self.y)
+        return self._mean.copy()
 
     @property
     def cov(self) -> np.ndarray:
         """``P = Y^-1``; raises :class:`UninformativeBeliefError` if ``Y`` is singular."""
-        P = self._solve(np.eye(self.dim))
-        return 0.5 * (P + P.T)
+        if self._cov is None:
+            P = self._solve(np.eye(self.dim))
+            self._cov = 0.5 * (P + P.T)
+        return self._cov.copy()
 
     def _solve(self, rhs: np.ndarray) -> np.ndarray:
         """``Y^-1 rhs`` by Cholesky (LAPACK potrf/potrs directly: scipy's wrappers cost ten times more
