@@ -35,6 +35,8 @@ then costs a few passes over ``n`` floats and converges to the float64 resolutio
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from fusion import validation
@@ -48,6 +50,7 @@ _MAX_ITER = 100
 #: (chosen here: numpy.linalg.matrix_rank's ``n eps`` with a margin of 8; measured here, rounding leaves the null
 #: eigenvalues of a rotated singular sum below ``0.71 n eps`` of the largest).
 _RANK_RTOL = 8.0 * np.finfo(float).eps
+_EPS = float(np.finfo(float).eps)
 
 OBJECTIVES = ("det", "trace")
 #: The error when neither input informs some direction (then no ICI weight or result is defined).
@@ -77,7 +80,7 @@ def ci_weight(Ya: np.ndarray, Yb: np.ndarray, objective: str = "det") -> float:
         raise ValueError(f"objective must be 'det' or 'trace', got {objective!r}")
     p, c = _joint_diagonalisation(Ya, Yb, vectors=objective == "trace", rule="CI")
     # n scalar terms in plain floats: numpy's per-call overhead on arrays of n = 6 would dominate the search.
-    terms = [(p_i, 1.0 - p_i, 2.0 * p_i - 1.0, c_i) for p_i, c_i in zip(p.tolist(), c.tolist(), strict=True)]
+    terms = [(p_i, 1.0 - p_i, 2.0 * p_i - 1.0, c_i) for p_i, c_i in zip(p, c, strict=True)]
     det = objective == "det"
 
     def slope(w: float) -> tuple[float, float]:
@@ -108,7 +111,7 @@ def ici_weight(Ya: np.ndarray, Yb: np.ndarray, objective: str = "det") -> float:
         raise ValueError(f"objective must be 'det' or 'trace', got {objective!r}")
     p, c = _joint_diagonalisation(Ya, Yb, vectors=objective == "trace")
     # n scalar terms in plain floats: numpy's per-call overhead on arrays of n = 6 would dominate the search.
-    terms = [(p_i, p_i * (1.0 - p_i), 1.0 - 2.0 * p_i, c_i) for p_i, c_i in zip(p.tolist(), c.tolist(), strict=True)]
+    terms = [(p_i, p_i * (1.0 - p_i), 1.0 - 2.0 * p_i, c_i) for p_i, c_i in zip(p, c, strict=True)]
     det = objective == "det"
 
     def slope(w: float) -> tuple[float, float]:
@@ -130,34 +133,34 @@ def ici_weight(Ya: np.ndarray, Yb: np.ndarray, objective: str = "det") -> float:
     return _convex_minimum(slope)
 
 
-def _joint_diagonalisation(Ya, Yb, vectors: bool, rule: str = "ICI") -> tuple[np.ndarray, np.ndarray]:
-    """``p`` (the eigenvalues of ``Y_a`` relative to ``S = Y_a + Y_b``) and ``c_i = |v_i|^2`` (ones unless asked).
+def _joint_diagonalisation(Ya, Yb, vectors: bool, rule: str = "ICI") -> tuple[list[float], list[float]]:
+    """``p`` (the eigenvalues of ``Y_a`` relative to ``S = Y_a + Y_b``, ascending, kept inside ``[eps, 1 - eps]``) and
+    ``c_i = |v_i|^2`` (ones unless asked), as plain floats.
 
     ``W`` whitens ``S`` (``W S W^T = I``) and ``W Y_a W^T = U diag(p) U^T``, ``V = W^T U``. ICI whitens with the
     Cholesky factor, ``W = L^-1``, and a singular ``S`` is an error; CI with the eigenvalues of ``S``, restricted
     to its range (:func:`_informed_whitening`).
 
     ``Y_a`` is positive semi-definite exactly when every ``p_i >= 0``, and ``Y_b`` when every ``p_i <= 1``, so the
-    decomposition doubles as the check of its inputs."""
+    decomposition doubles as the check of its inputs. Every step is one numpy call on the whole matrix (the
+    symmetric eigensolvers read one triangle, so nothing is symmetrised): numpy's per-call overhead, not the
+    arithmetic, is most of the cost at these sizes."""
     name_a, name_b = f"{rule} input information matrix Y_a", f"{rule} input information matrix Y_b"
-    Ya = _symmetric(Ya, name_a)
-    Yb = _symmetric(Yb, name_b, Ya.shape[0])
+    Ya, Yb, S = _checked_pair(Ya, Yb, name_a, name_b)
     if rule == "ICI":
         try:
-            W = np.linalg.inv(np.linalg.cholesky(Ya + Yb))
+            W = np.linalg.inv(np.linalg.cholesky(S))
         except np.linalg.LinAlgError:
             raise ValueError(UNINFORMED) from None
     else:
-        W = _informed_whitening(Ya, Yb, name_a, name_b)
-    M = W @ Ya @ W.T
-    M = 0.5 * (M + M.T)
+        W = _informed_whitening(Ya, Yb, S, name_a, name_b)
     if not vectors:
-        p = np.linalg.eigvalsh(M)
-        c = np.ones_like(p)
+        p = np.linalg.eigvalsh(W @ Ya @ W.T).tolist()
+        c = [1.0] * len(p)
     else:
-        p, U = np.linalg.eigh(M)
-        c = np.sum((W.T @ U) ** 2, axis=0)
-    if p.size and (p[0] < -validation.PSD_RTOL or p[-1] > 1.0 + validation.PSD_RTOL):
+        p, U = np.linalg.eigh(W @ Ya @ W.T)
+        p, c = p.tolist(), np.sum((W.T @ U) ** 2, axis=0).tolist()
+    if p and (p[0] < -validation.PSD_RTOL or p[-1] > 1.0 + validation.PSD_RTOL):
         # A p_i outside [0, 1] is a negative eigenvalue of Y_a or Y_b, or the rounding error of an ill-conditioned
         # S (about eps |W|^2 |S|): the eigenvalues of the inputs decide, with the tolerance of every other check.
         validation.as_psd(Ya, name_a)
@@ -165,11 +168,27 @@ def _joint_diagonalisation(Ya, Yb, vectors: bool, rule: str = "ICI") -> tuple[np
     # Keep the scalar terms positive where one input carries no information (p = 0 or 1): for ICI
     # r = p + w (q - p), whose objective is then the limit of the covariance form, which moves the optimum off that
     # input's end point; for CI m = w p + (1-w) q, whose objective is then finite but far from optimal there.
-    eps = np.finfo(float).eps
-    return np.clip(p, eps, 1.0 - eps), c
+    lo, hi = _EPS, 1.0 - _EPS
+    return [lo if p_i < lo else hi if p_i > hi else p_i for p_i in p], c
 
 
-def _informed_whitening(Ya: np.ndarray, Yb: np.ndarray, name_a: str, name_b: str) -> np.ndarray:
+def _checked_pair(Ya, Yb, name_a: str, name_b: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``Y_a``, ``Y_b`` as float arrays and ``S = Y_a + Y_b``, after the checks of :func:`_symmetric` (finite,
+    square, of one size, symmetric): made in full, with their messages, only when a cheap screen fails — a shape
+    other than ``(n, n)``, a non-finite sum of ``S`` (a NaN or inf anywhere in the inputs makes it one; so can an
+    overflow, which the full check then lets through) or inputs that are not exactly symmetric."""
+    Ya, Yb = np.asarray(Ya, dtype=float), np.asarray(Yb, dtype=float)
+    if Ya.ndim == 2 and Ya.shape[0] == Ya.shape[1] and Yb.shape == Ya.shape:
+        S = Ya + Yb
+        # bit-for-bit symmetric: the bytes of the transpose (a C-order copy) are the bytes of the matrix
+        if math.isfinite(S.sum()) and Ya.tobytes() == Ya.T.tobytes() and Yb.tobytes() == Yb.T.tobytes():
+            return Ya, Yb, S
+    Ya = _symmetric(Ya, name_a)
+    Yb = _symmetric(Yb, name_b, Ya.shape[0])
+    return Ya, Yb, Ya + Yb
+
+
+def _informed_whitening(Ya: np.ndarray, Yb: np.ndarray, S: np.ndarray, name_a: str, name_b: str) -> np.ndarray:
     """``W = diag(s_r^-1/2) U_r^T`` (``r x n``) from ``S = Y_a + Y_b = U diag(s) U^T``, on the ``r`` eigenvalues
     above :data:`_RANK_RTOL` ``n s_max``: ``W S W^T = I_r``. The common null space of two positive semi-definite
     matrices is the null space of their sum, so ``W`` keeps every direction either input informs. (A Cholesky
@@ -178,11 +197,12 @@ def _informed_whitening(Ya: np.ndarray, Yb: np.ndarray, name_a: str, name_b: str
 
     A singular ``S`` is where the range alone cannot see a negative eigenvalue of an input (``Y_a = -Y_b``): the
     inputs' own eigenvalues are checked then."""
-    s, U = np.linalg.eigh(Ya + Yb)
+    s, U = np.linalg.eigh(S)
+    if s[0] > _RANK_RTOL * s.size * s[-1]:  # the common case: S is positive definite
+        return (U / np.sqrt(s)).T
+    validation.as_psd(Ya, name_a)
+    validation.as_psd(Yb, name_b)
     keep = s > _RANK_RTOL * s.size * s[-1]
-    if not keep.all():
-        validation.as_psd(Ya, name_a)
-        validation.as_psd(Yb, name_b)
     return (U[:, keep] / np.sqrt(s[keep])).T
 
 
