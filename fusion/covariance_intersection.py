@@ -5,9 +5,12 @@ Julier & Uhlmann, 1997). The result is consistent for any unknown correlation be
 any admissible weights; the weights only decide how much is lost.
 
 * :func:`ci` optimises the weights: ``"det"`` maximises ``log det Y_c`` (minimum entropy, Merino §3.2.3),
-  ``"trace"`` minimises ``tr(Y_c^-1)``. Both objectives are convex in ``w``: for two beliefs a bounded
-  scalar search (Brent) on ``w in [0, 1]``; for more, SLSQP on the simplex with analytic gradients
-  ``d log det Y_c / d w_i = tr(Y_c^-1 Y_i)`` and ``d tr(Y_c^-1) / d w_i = -tr(Y_c^-1 Y_i Y_c^-1)``.
+  ``"trace"`` minimises ``tr(Y_c^-1)``. Both objectives are convex in ``w``. For two beliefs,
+  ``Y_c = Y_b + w D`` with ``D = Y_a - Y_b``, and the joint eigenvalues of the pair turn each objective into
+  ``n`` scalar terms with closed-form first and second derivatives (``-log det Y_c = const - sum_i log m_i(w)``,
+  ``m_i`` affine in ``w``; Reinhardt, Noack & Hanebeck, 2012): a safeguarded Newton search on ``[0, 1]`` that
+  checks the end points first (:func:`fusion.pair_weights.ci_weight`). For more, SLSQP on the simplex with
+  analytic gradients ``d log det Y_c / d w_i = tr(Y_c^-1 Y_i)`` and ``d tr(Y_c^-1) / d w_i = -tr(Y_c^-1 Y_i Y_c^-1)``.
 * :func:`fast_ci` uses the closed-form weights ``w_i ∝ 1 / tr(P_i)`` (Niehsen, 2002), so the more
   informative estimate gets the larger weight.
 
@@ -21,6 +24,8 @@ from collections.abc import Sequence
 
 import numpy as np
 import scipy.optimize
+
+from fusion.pair_weights import ci_weight
 
 #: Objective value used where the combined information matrix is singular (chosen here).
 _SINGULAR_PENALTY = 1e300
@@ -64,26 +69,18 @@ def combine(beliefs: Sequence, weights: Sequence[float]):
 
 
 def optimal_weights(matrices: Sequence[np.ndarray], objective: str = "det") -> np.ndarray:
-    """Simplex weights that optimise ``objective`` ("det" or "trace") for the information matrices."""
+    """Simplex weights that optimise ``objective`` ("det" or "trace") for the information matrices.
+
+    Two matrices: the exact optimum of :func:`fusion.pair_weights.ci_weight` (which raises ``ValueError`` for
+    inputs that are not finite, square, of one size, symmetric and positive semi-definite); more: SLSQP."""
     if objective not in ("det", "trace"):
         raise ValueError(f"objective must be 'det', 'trace' or a list of weights, got {objective!r}")
-    cost = _neg_logdet if objective == "det" else _trace_of_inverse
     if len(matrices) == 1:
         return np.ones(1)
     if len(matrices) == 2:
-        value = _neg_logdet_value if objective == "det" else (lambda Y: _trace_of_inverse(Y)[0])
-        Ya, Yb = matrices
-        res = scipy.optimize.minimize_scalar(
-            lambda w: value(w * Ya + (1.0 - w) * Yb), bounds=(0.0, 1.0), method="bounded",
-            options={"xatol": 1e-6},
-        )
-        w = float(res.x)
-        # The bounded search never evaluates the end points; they can be the optimum (e.g. one input
-        # carries no information), so compare them explicitly.
-        candidates = [(value(w * Ya + (1 - w) * Yb), w), (value(Ya), 1.0), (value(Yb), 0.0)]
-        w = min(candidates)[1]
+        w = ci_weight(matrices[0], matrices[1], objective)
         return np.array([w, 1.0 - w])
-    return _simplex_optimum(list(matrices), cost)
+    return _simplex_optimum(list(matrices), _neg_logdet if objective == "det" else _trace_of_inverse)
 
 
 def _simplex_optimum(matrices: list[np.ndarray], cost) -> np.ndarray:

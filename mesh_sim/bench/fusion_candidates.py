@@ -9,8 +9,12 @@ The *bare-numpy bound* of each operation is the same arithmetic written inline o
 objects, no dispatch, no argument validation. It keeps the numerical tests that decide the result
 (the positive-semi-definiteness checks of ``remove`` in the channel filter, the positive-definiteness
 test of fast CI; the ``checks=False`` variants drop them, for information) and, for CI, the same
-bounded Brent search (``scipy.optimize.minimize_scalar``), so that skymesh / bound measures the
-overhead of the skymesh layer, not a different algorithm.
+weight computation on plain arrays (:func:`fusion.pair_weights.ci_weight`), so that skymesh / bound
+measures the overhead of the skymesh layer, not a different algorithm.
+
+The two-input CI weight itself is timed against :func:`brent_weight_baseline`, a compact copy of the bounded
+Brent search (``scipy.optimize.minimize_scalar``) that ``fusion.covariance_intersection.optimal_weights``
+used before issue 12: kept here only as that baseline.
 
 Other libraries are optional: :func:`filterpy` and :func:`stonesoup` return ``None`` when missing.
 """
@@ -31,10 +35,11 @@ import scipy.optimize
 from fusion import information_filter
 from fusion.batch import GaussianBatch
 from fusion.channel_filter import ChannelFilter
-from fusion.covariance_intersection import ci, fast_ci
+from fusion.covariance_intersection import ci, fast_ci, optimal_weights
 from fusion.gaussian import Gaussian
 from fusion.measurement import Bearing2D, Bearing3D, PositionMeasurement, wrap_angle
 from fusion.motion import ConstantVelocity
+from fusion.pair_weights import ci_weight
 
 TRACKS = 100
 DT = 0.2  # chosen here: one step of the default 5 Hz agent loop (DESIGN.md §4)
@@ -214,16 +219,57 @@ def sky_ci(sc: Scenario) -> Candidate:
 def numpy_ci(sc: Scenario) -> Candidate:
     ya, Ya, yb, Yb, box = sc.priors[0].y, sc.priors[0].Y, sc.others[0].y, sc.others[0].Y, [None]
 
-    def cost(w):
-        sign, logdet = np.linalg.slogdet(w * Ya + (1.0 - w) * Yb)
-        return -logdet if sign > 0 else 1e300
-
     def step():
-        res = scipy.optimize.minimize_scalar(cost, bounds=(0.0, 1.0), method="bounded", options={"xatol": 1e-6})
-        w = min((cost(res.x), res.x), (cost(1.0), 1.0), (cost(0.0), 0.0))[1]
+        w = ci_weight(Ya, Yb, "det")
         box[0] = (w * ya + (1.0 - w) * yb, w * Ya + (1.0 - w) * Yb)
 
     return Candidate(step, lambda: _moments(*box[0]))
+
+
+def _weight_candidate(sc: Scenario, weight: Callable[[np.ndarray, np.ndarray], float]) -> Candidate:
+    """The two-input CI weight of each track's pair ``(priors[i].Y, others[i].Y)`` in turn (so that the figure is
+    a mean over 100 pairs, interior optima and end points alike); ``state()`` is ``([w], M(w)^-1)`` of the last."""
+    pairs, box = [(a.Y, b.Y) for a, b in zip(sc.priors, sc.others, strict=True)], [0, None]
+
+    def step():
+        i = box[0]
+        box[0], box[1] = (i + 1) % len(pairs), (weight(*pairs[i]), pairs[i])
+
+    def state():
+        w, (Ya, Yb) = box[1]
+        return np.array([w]), np.linalg.inv(w * Ya + (1.0 - w) * Yb)
+
+    return Candidate(step, state)
+
+
+def sky_ci_weight(sc: Scenario, objective: str) -> Candidate:
+    return _weight_candidate(sc, lambda Ya, Yb: float(optimal_weights([Ya, Yb], objective)[0]))
+
+
+def brent_ci_weight(sc: Scenario, objective: str) -> Candidate:
+    return _weight_candidate(sc, lambda Ya, Yb: brent_weight_baseline(Ya, Yb, objective))
+
+
+def brent_weight_baseline(Ya: np.ndarray, Yb: np.ndarray, objective: str) -> float:
+    """BASELINE ONLY — not used by skymesh: the two-input weight as ``optimal_weights`` computed it before issue 12,
+    SciPy's bounded Brent search on ``f(w)`` (``-log det M(w)`` or ``tr M(w)^-1``, 1e300 where ``M(w)`` is
+    singular) with ``xatol = 1e-6``, then the better of its result and the two end points (which it never
+    evaluates)."""
+
+    def cost(w: float) -> float:
+        M = w * Ya + (1.0 - w) * Yb
+        if objective == "det":
+            sign, logdet = np.linalg.slogdet(M)
+            return -float(logdet) if sign > 0 else 1e300
+        try:
+            inv = np.linalg.inv(M)
+            np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            return 1e300
+        return float(np.trace(inv))
+
+    res = scipy.optimize.minimize_scalar(cost, bounds=(0.0, 1.0), method="bounded", options={"xatol": 1e-6})
+    return min((cost(float(res.x)), float(res.x)), (cost(1.0), 1.0), (cost(0.0), 0.0))[1]
 
 
 def sky_fast_ci(sc: Scenario) -> Candidate:

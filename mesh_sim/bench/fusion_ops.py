@@ -12,6 +12,10 @@ implementation timed in the same run, interleaved (see :mod:`mesh_sim.bench.comm
   ``ExtendedKalmanFilter``, Stone Soup ``ExtendedKalmanUpdater`` with ``Cartesian2DToBearing`` /
   ``CartesianToElevationBearing``;
 * covariance intersection with the det-optimal weight for two beliefs, and fast CI (Niehsen, 2002);
+* the two-input CI weight alone ("det" and "trace"; ``fusion.covariance_intersection.optimal_weights``: joint
+  diagonalisation and a safeguarded Newton search, :func:`fusion.pair_weights.ci_weight`) beside the bounded Brent
+  search it replaced (issue 12; :func:`mesh_sim.bench.fusion_candidates.brent_weight_baseline`, kept only as
+  that baseline), as a ratio, over the 100 track pairs in turn;
 * a channel-filter exchange (``ChannelFilter``, policy ``exact``, static Gaussians): ``on_send`` then
   ``on_receive`` of a message that acknowledges it.
 
@@ -49,8 +53,8 @@ AGREEMENT_WARN = 1e-5  # relative difference above which a cell is flagged (Ston
 class Op:
     key: str
     label: str
-    section: str  # "single" or "batched"
-    goal: str | None  # "numpy" (skymesh/numpy <= 1.5), "stonesoup" (stonesoup/batch >= 20) or None
+    section: str  # "single", "weights" or "batched"
+    goal: str | None  # "numpy" (skymesh/numpy <= 1.5), "stonesoup" (stonesoup/batch >= 20) or None (information)
     reference: str  # the implementation the others are checked against
 
 
@@ -61,6 +65,8 @@ OPS = [
     Op("ci_det", "CI det-optimal, 2 inputs", "single", "numpy", "skymesh"),
     Op("fast_ci", "fast CI, 2 inputs", "single", "numpy", "skymesh"),
     Op("cf_receive", "channel filter send+receive (exact)", "single", "numpy", "skymesh"),
+    Op("ci_weight_det", "CI weight, det, 2 inputs", "weights", None, "skymesh"),
+    Op("ci_weight_trace", "CI weight, trace, 2 inputs", "weights", None, "skymesh"),
     Op("batch_if", "IF predict+update", "batched", "stonesoup", "batch"),
     Op("batch_bearing", "bearing EIF update", "batched", "stonesoup", "batch"),
     Op("batch_fast_ci", "fast CI of pairs", "batched", None, "batch"),
@@ -89,6 +95,12 @@ def _factories(op: Op, sc: fc.Scenario, fp, ss: fc.StoneSoupSetup | None) -> dic
             "skymesh": lambda: fc.sky_fast_ci(sc),
             "numpy": lambda: fc.numpy_fast_ci(sc),
             "numpy-nochecks": lambda: fc.numpy_fast_ci(sc, checks=False),
+        },
+        "ci_weight_det": {
+            "skymesh": lambda: fc.sky_ci_weight(sc, "det"), "brent": lambda: fc.brent_ci_weight(sc, "det"),
+        },
+        "ci_weight_trace": {
+            "skymesh": lambda: fc.sky_ci_weight(sc, "trace"), "brent": lambda: fc.brent_ci_weight(sc, "trace"),
         },
         "cf_receive": {
             "skymesh": lambda: fc.sky_cf(sc),
@@ -168,7 +180,9 @@ def _compare(rows: list[dict]) -> tuple[list[dict], dict]:
             if t is None:
                 continue
             entry = {"op": op.key, "n": n}
-            if op.section == "single":
+            if op.section == "weights":
+                entry["brent_over_skymesh"] = t["brent"] / t["skymesh"]
+            elif op.section == "single":
                 sky = t["skymesh"]
                 entry["skymesh_over_numpy"] = sky / t["numpy"]
                 for lib in OTHER_LIBRARIES:
@@ -258,6 +272,24 @@ def report(result: dict, console=None) -> None:
         [("operation", "left"), "n", "skymesh", "bare numpy", "skymesh ÷ numpy", f"goal ≤{SINGLE_OP_GOAL}x",
          "filterpy (÷ skymesh)", "Stone Soup (÷ skymesh)", "Stone Soup info (÷ skymesh)"],
         single_rows, caption,
+    )
+
+    weight_rows = []
+    for op in (o for o in OPS if o.section == "weights"):
+        for n in SIZES:
+            new, old = us(op.key, n, "skymesh"), us(op.key, n, "brent")
+            if new is None:
+                continue
+            weight_rows.append([op.label, n, common.fmt_us(new), common.fmt_us(old) + flag(op.key, n, "brent"),
+                                common.fmt_ratio(None if old is None else old / new)])
+    common.print_table(
+        console, "Two-input CI weight (µs per call)",
+        [("operation", "left"), "n", "skymesh", "old Brent search", "Brent ÷ skymesh"],
+        weight_rows,
+        "skymesh: optimal_weights (joint diagonalisation, safeguarded Newton); old Brent search: the bounded "
+        "minimize_scalar it replaced, kept in the benchmark as the baseline. Each call takes the next of the 100 track "
+        "pairs;"
+        f" ≠ marks a weight or fused covariance that differs by more than {AGREEMENT_WARN:g}.",
     )
 
     batch_rows = []

@@ -24,7 +24,7 @@ def test_bench_fusion_ops_quick_writes_complete_json(tmp_path):
     path = tmp_path / "out" / "fusion-ops.json"
     proc = _skymesh("bench", "fusion-ops", "--quick", "--json", str(path), "--repeats", "2")
     assert proc.returncode == 0, proc.stderr
-    assert "Single operations" in proc.stdout and "Batched" in proc.stdout
+    assert "Single operations" in proc.stdout and "Batched" in proc.stdout and "Two-input CI weight" in proc.stdout
     result = json.loads(path.read_text())
     assert result["benchmark"] == "fusion-ops"
     assert result["settings"]["quick"] is True
@@ -37,10 +37,14 @@ def test_bench_fusion_ops_quick_writes_complete_json(tmp_path):
     impls = {}
     for r in rows:
         impls.setdefault((r["op"], r["n"]), set()).add(r["impl"])
+    baseline = {"single": "numpy", "weights": "brent", "batched": "skymesh-loop"}
     for op in fusion_ops.OPS:
         for n in fusion_ops.SIZES:
             got = impls.get((op.key, n), set())
-            assert {op.reference, "numpy" if op.section == "single" else "skymesh-loop"} <= got, (op.key, n, got)
+            assert {op.reference, baseline[op.section]} <= got, (op.key, n, got)
+    weight_ratios = [c["brent_over_skymesh"] for c in result["comparisons"] if c["op"].startswith("ci_weight")]
+    assert len(weight_ratios) == 2 * len(fusion_ops.SIZES)
+    assert all(math.isfinite(r) and r > 0 for r in weight_ratios)
     for n in fusion_ops.SIZES:  # the test extras install filterpy and Stone Soup
         assert {"filterpy", "stonesoup", "stonesoup-info"} <= impls[("if_predict_update", n)]
         assert {"filterpy", "stonesoup"} <= impls[("bearing_eif", n)]
