@@ -261,9 +261,13 @@ class Tracker:
         est = track.estimate() if offset == 0 else track.belief.state(offset)
         model = self._model(bearing)
         z_hat, H = model.linearize(est.mean)
-        nu = model.residual(bearing.azel, z_hat)
-        S = H @ est.cov @ H.T + bearing.R
-        return float(nu @ np.linalg.solve(S, nu))
+        nu0, nu1 = model.residual(bearing.azel, z_hat).tolist()
+        J = H[:, :3]  # a bearing sees the position only
+        (a, b), (_, d) = (J @ est.cov[:3, :3] @ J.T + bearing.R).tolist()  # S = H P H^T + R, 2x2 symmetric
+        det = a * d - b * b
+        if not det > 0.0:
+            raise np.linalg.LinAlgError("innovation covariance is not positive definite")
+        return (d * nu0 * nu0 - 2.0 * b * nu0 * nu1 + a * nu1 * nu1) / det  # nu^T S^-1 nu, S^-1 in closed form
 
     def _distances(self, bearings: list[Bearing]) -> tuple[list[int], np.ndarray]:
         ids = list(self.tracks)
