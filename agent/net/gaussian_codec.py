@@ -10,6 +10,8 @@ semi-definite — and raises only :class:`agent.net.wire.DecodeError` (reasons `
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from agent.net.wire import DecodeError, is_int
@@ -55,18 +57,17 @@ def encode_trajectory(t: Trajectory) -> dict:
     if the matrix is not block-tridiagonal (a defect upstream: it would be silently truncated)."""
     n, L = t.model.state_dim, t.model.window
     Y = np.asarray(t.Y, dtype=np.float64)
-    blocks = Y.reshape(L, n, L, n).transpose(0, 2, 1, 3)  # blocks[i, j] = Y[i*n:(i+1)*n, j*n:(j+1)*n]
-    i, j = np.indices((L, L))
-    outside = blocks[np.abs(i - j) > 1]
-    if outside.size and np.max(np.abs(outside)) > 1e-12 * max(1.0, float(np.max(np.abs(Y)))):
+    outside, k = _band(L, n)
+    if outside.any() and np.abs(Y[outside]).max() > 1e-12 * max(1.0, float(np.abs(Y).max())):
         raise ValueError("trajectory information matrix is not block-tridiagonal")
+    blocks = Y.reshape(L, n, L, n)  # blocks[i, :, j, :] = Y[i*n:(i+1)*n, j*n:(j+1)*n]
     return {
         "epoch": int(t.epoch),
         "n": n,
         "L": L,
         "y": np.asarray(t.y, dtype=np.float64),
-        "diag": np.ascontiguousarray(blocks[np.arange(L), np.arange(L)]),
-        "off": np.ascontiguousarray(blocks[np.arange(1, L), np.arange(L - 1)]),
+        "diag": blocks[k, :, k, :],
+        "off": blocks[k[1:], :, k[:-1], :],
     }
 
 
@@ -83,12 +84,26 @@ def decode_trajectory(d, model: TrajectoryModel) -> Trajectory:
     if y.shape != (L * n,) or diag.shape != (L, n, n) or off.shape != (L - 1, n, n):
         raise DecodeError("bad_shape", f"y {y.shape}, diag {diag.shape}, off {off.shape} for n={n}, L={L}")
     _check_finite(y, diag, off)
+    with np.errstate(all="ignore"):  # only the diagonal blocks can be asymmetric: the band is mirrored below
+        scale = max(1.0, float(np.abs(diag).max()), float(np.abs(off).max()) if off.size else 0.0)
+        if float(np.abs(diag - diag.transpose(0, 2, 1)).max()) > SYMMETRY_RTOL * scale:
+            raise DecodeError("indefinite", "information matrix is not symmetric")
+    _, k = _band(L, n)
     blocks = np.zeros((L, n, L, n))  # blocks[i, :, j, :] = Y[i*n:(i+1)*n, j*n:(j+1)*n]
-    k = np.arange(L)
-    blocks[k, :, k, :] = diag
+    blocks[k, :, k, :] = 0.5 * (diag + diag.transpose(0, 2, 1))
     blocks[k[1:], :, k[:-1], :] = off
     blocks[k[:-1], :, k[1:], :] = off.transpose(0, 2, 1)
-    return Trajectory(y, _information_matrix(blocks.reshape(L * n, L * n)), d["epoch"], model)
+    Y = blocks.reshape(L * n, L * n)
+    _require_psd(Y)
+    return Trajectory(y, Y, d["epoch"], model)
+
+
+@functools.cache
+def _band(L: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The entries of an ``L x L`` block matrix of ``n x n`` blocks outside its tridiagonal band (a mask), and
+    the block indices ``0..L-1``."""
+    block = np.arange(L * n) // n
+    return np.abs(block[:, None] - block[None, :]) > 1, np.arange(L)
 
 
 def _expect_keys(d, keys: set[str]) -> None:
@@ -114,18 +129,22 @@ def _check_finite(*arrays: np.ndarray) -> None:
 
 
 def _information_matrix(Y: np.ndarray) -> np.ndarray:
-    """Symmetric to SYMMETRY_RTOL and PSD to ``validation.PSD_RTOL`` (one Cholesky factorisation when it is
-    definite, :func:`fusion.validation.is_psd`); returned exactly symmetric. ``Y`` holds finite values."""
+    """Symmetric to SYMMETRY_RTOL and PSD; returned exactly symmetric. ``Y`` holds finite values."""
     with np.errstate(all="ignore"):
-        asymmetry = Y - Y.T
         scale = max(1.0, float(np.abs(Y).max()))
-        if float(np.abs(asymmetry).max()) > SYMMETRY_RTOL * scale:
+        if float(np.abs(Y - Y.T).max()) > SYMMETRY_RTOL * scale:
             raise DecodeError("indefinite", "information matrix is not symmetric")
-        Y = 0.5 * (Y + Y.T)
-        try:
-            psd = validation.is_psd(Y)
-        except np.linalg.LinAlgError:
-            psd = False
+    Y = 0.5 * (Y + Y.T)
+    _require_psd(Y)
+    return Y
+
+
+def _require_psd(Y: np.ndarray) -> None:
+    """PSD to ``validation.PSD_RTOL``: one Cholesky factorisation when it is definite
+    (:func:`fusion.validation.is_psd`)."""
+    try:
+        psd = validation.is_psd(Y)
+    except np.linalg.LinAlgError:
+        psd = False
     if not psd:
         raise DecodeError("indefinite", "information matrix is not positive semi-definite")
-    return Y
