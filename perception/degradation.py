@@ -182,6 +182,11 @@ class Speckle:
     dark: bool
     gray: int = 0
 
+    def box(self) -> tuple[int, int, int, int]:
+        """``(x0, y0, x1, y1)``: the pixels the speckle may cover."""
+        r = max(self.axes)
+        return self.centre[0] - r, self.centre[1] - r, self.centre[0] + r, self.centre[1] + r
+
 
 def plan_speckles(
     deg: Degradation, width: int, height: int, rng: np.random.Generator, rgb: bool = True

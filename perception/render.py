@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import cv2
 import numpy as np
@@ -145,6 +145,7 @@ class Projected:
     radius: float
     outline: np.ndarray | None = None
 
+    @cached_property
     def box(self) -> tuple[float, float, float, float]:
         """``(x0, y0, x1, y1)``: the pixels the object covers."""
         if self.outline is not None:
