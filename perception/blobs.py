@@ -13,6 +13,12 @@
 Both validate each frame (:func:`perception.frames.check_frame`); a rejected frame gives an empty
 :class:`~perception.detection.DetectionResult` with ``error`` set and is counted in ``rejected``.
 Frames are RGB uint8 (grayscale accepted by the dark-blob detector).
+
+Both also take a frame drawn in parts (:class:`~perception.roi_frame.RoiFrame`, from
+:func:`perception.roi_render.render_roi`) and run the same steps where it was drawn: the colour detector in its
+full-resolution windows, the dark detector in its preview — the whole view at the working size, checked for
+contrast and equalised whole as a downsampled frame is — cut to the windows; the banding rows are read on the
+preview. Detections are in frame pixels either way.
 """
 
 from __future__ import annotations

@@ -87,10 +87,16 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 
 
 @lru_cache(maxsize=16)
-def _rgb_noise(width: int, height: int, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """Positive and negative parts of a Gaussian noise bank (uint8, padded for random offsets)."""
+def _rgb_noise(width: int, height: int, sigma: float, average: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Positive and negative parts of a Gaussian noise bank (uint8, padded for random offsets; each part keeps
+    the whole gray levels of its draws). ``average`` > 1: the bank of frames ``average`` times larger, each value
+    the rounded mean of ``average``×``average`` of its values, as ``cv2.INTER_AREA`` averages a frame's noise down
+    to this size (standard deviation ÷ ``average``)."""
     rng = np.random.default_rng(12345)
-    n = rng.normal(0.0, sigma, (height + _PAD, width + _PAD, 3))
+    n = rng.normal(0.0, sigma, ((height + _PAD) * average, (width + _PAD) * average, 3))
+    if average > 1:
+        kept = np.trunc(np.clip(n, -255, 255))
+        n = np.round(kept.reshape(height + _PAD, average, width + _PAD, average, 3).mean(axis=(1, 3)))
     return _frozen(np.clip(n, 0, 255).astype(np.uint8)), _frozen(np.clip(-n, 0, 255).astype(np.uint8))
 
 
@@ -106,12 +112,15 @@ def noise_offset(rng: np.random.Generator) -> tuple[int, int]:
     return int(dy), int(dx)
 
 
-def add_rgb_noise(rgb: np.ndarray, sigma: float, frame_size: tuple[int, int], at: tuple[int, int]) -> None:
+def add_rgb_noise(
+    rgb: np.ndarray, sigma: float, frame_size: tuple[int, int], at: tuple[int, int], average: int = 1
+) -> None:
     """Add Gaussian noise of ``sigma`` gray levels in place to ``rgb`` (uint8, saturating), from the bank of
     frames of ``frame_size = (width, height)``, starting at bank pixel ``at = (row, column)``: a frame's
     :func:`noise_offset`, plus the position of ``rgb`` in the frame when it is a window of it (so a window gets
-    the very noise the whole frame would have there)."""
-    pos, neg = _rgb_noise(*frame_size, float(sigma))
+    the very noise the whole frame would have there). ``average``: ``rgb`` is a frame ``average`` times larger
+    averaged down (its noise too, see :func:`_rgb_noise`)."""
+    pos, neg = _rgb_noise(*frame_size, float(sigma), average)
     (y, x), (h, w) = at, rgb.shape[:2]
     cv2.add(rgb, pos[y : y + h, x : x + w], dst=rgb)
     cv2.subtract(rgb, neg[y : y + h, x : x + w], dst=rgb)

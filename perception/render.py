@@ -58,6 +58,8 @@ VISIBLE_FRACTION = 0.5  # a target at least this unoccluded counts as visible (c
 SMOKE_OPAQUE = 0.5  # smoke alpha at the target centre above which it is hidden (chosen here)
 SMOKE_IR = 0.1  # fraction of the smoke opacity seen by the thermal camera (chosen here)
 _SHIFT = 4  # sub-pixel bits for OpenCV drawing
+_ANGLES = np.linspace(0.0, 2 * math.pi, 24, endpoint=False)
+_RIM = np.column_stack([np.cos(_ANGLES), np.sin(_ANGLES), np.zeros_like(_ANGLES)])  # a disc's unit rim, NED
 _PAD = 32
 
 
@@ -185,9 +187,7 @@ def project_object(view: PinholeView, obj: Target) -> Projected | None:
     centre = uvw[:2] / uvw[2]
     if obj.shape != "disc":
         return Projected(centre, float(cam[2]), view.focal * math.tan(math.asin(min(obj.radius_m / dist, 1.0))))
-    a = np.linspace(0.0, 2 * math.pi, 24, endpoint=False)
-    ring = pos + obj.radius_m * np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)])
-    poly = _clip_project(view, ring)
+    poly = _clip_project(view, pos + obj.radius_m * _RIM)
     if poly is None:
         return None
     radius = float(np.sqrt(max(cv2.contourArea(poly.astype(np.float32)), 0.0) / math.pi))
@@ -213,8 +213,9 @@ def target_label(
     """The label of target ``index``, drawn as object ``k`` (``drawn = (k, projection)``, ``None``: not drawn).
 
     ``ids`` holds the object number of every pixel of the frame region starting at pixel ``origin`` (it must
-    cover the target's :meth:`Projected.label_box`); the visible fraction is the share of the target's own
-    pixels there that still show it. ``alpha``: the frame's smoke opacity, or ``None``."""
+    cover the target's :meth:`Projected.label_box`; ``None``: no other object is drawn there); the visible
+    fraction is the share of the target's own pixels there that still show it. ``alpha``: the frame's smoke
+    opacity, or ``None``."""
     if drawn is None:
         return TargetLabel(index, (math.nan, math.nan), math.nan, 0.0, False, False, 0.0)
     k, shape = drawn
@@ -227,7 +228,9 @@ def target_label(
         shape.draw(alone, 1, cv2.LINE_8, offset=(x0, y0))
         total = int(np.count_nonzero(alone))
         ox, oy = origin
-        seen = int(np.count_nonzero(ids[y0 - oy : y1 - oy, x0 - ox : x1 - ox][alone > 0] == k))
+        seen = (
+            total if ids is None else int(np.count_nonzero(ids[y0 - oy : y1 - oy, x0 - ox : x1 - ox][alone > 0] == k))
+        )
         fraction = seen / total if total else 0.0
     smoky = alpha is not None and in_view and alpha[int(round(v)), int(round(u))] > SMOKE_OPAQUE
     visible = in_view and fraction >= VISIBLE_FRACTION and not smoky

@@ -4,19 +4,24 @@
 only ever finds the few targets in it and the frame-level measures look at it at 320×240. :func:`render_roi`
 draws, from the same scene, camera and noise model, a :class:`~perception.roi_frame.RoiFrame`:
 
-* the **preview**: the whole view at scale ``s = min(1, 320/W, 240/H)`` (320×240 for 640×480: the image ``I`` of
-  the video quality D(t), thesis 000 §2.4; the rows of the banding test, :func:`perception.quality.blind_rows`;
-  the working image of the dark-blob detector, §2.2 — each of which downsamples a whole frame to that size with
-  area averaging). A preview pixel stands for the mean of ``n = 1/s²`` frame pixels, so the sensor noise of
-  ``σ`` gray levels per frame pixel is drawn with ``σ·s = σ/√n`` (the standard deviation of a mean of ``n``
-  independent draws); speckles are drawn at scale ``s``;
-* with ``windows=True``, the full-resolution **windows**: around each target whose projection meets the frame,
-  the box of its projected outline grown by :data:`WINDOW_MARGIN_PX` and clipped to the frame, overlapping boxes
-  merged (no blob is split between two windows). The renderer projects from the true pose, so a window needs no
-  allowance for pose error, only for what the detector adds around a target's pixels. A window is the camera
-  with its principal point moved (projection ``A·P``, ``A = [[1, 0, −x0], [0, 1, −y0], [0, 0, 1]]``; the
-  preview's is ``A = [[s, 0, (s − 1)/2], [0, s, (s − 1)/2], [0, 0, 1]]``), and takes the frame's noise bank at
-  its own position, so its pixels are the whole frame's there;
+* the **preview**: the whole view at scale ``s = min(1, 320/W, 240/H)``, i.e. ``k = 1/s`` frame pixels per
+  preview pixel (320×240 for 640×480, k = 2): the image ``I`` of the video quality D(t), thesis 000 §2.4; the
+  rows of the banding test, :func:`perception.quality.blind_rows`; the working image of the dark-blob detector,
+  §2.2 — each of which is the whole frame downsampled to that size by area averaging (``cv2.INTER_AREA``). So a
+  preview pixel is drawn as the mean of k×k frame pixels: the ground samples the frame's mip level averaged over
+  the texels those pixels cover (:meth:`perception.ground.FlatGround.layer`), the sensor noise is the frame's
+  noise bank averaged over k×k pixels (standard deviation ``σ/k``, the mean of k² independent draws;
+  :func:`perception.degradation.add_rgb_noise`), the targets and speckles are drawn at scale ``s``;
+* the full-resolution **windows**: around each target and speckle that meets the frame (what a detector may
+  respond to: the colour detector to the red targets, the dark detector to dark targets and dark speckles), the
+  box of its pixels grown by :data:`WINDOW_MARGIN_PX`, out to whole preview pixels and clipped to the frame,
+  overlapping boxes merged (no blob is split between two windows). The renderer projects from the true pose, so
+  a window needs no allowance for pose error, only for what the detector adds around a target's pixels. A window
+  is the camera with its principal point moved (projection ``A·P``, ``A = [[1, 0, −x0], [0, 1, −y0], [0, 0, 1]]``;
+  the preview's is ``A = [[s, 0, (s − 1)/2], [0, s, (s − 1)/2], [0, 0, 1]]``, pixel centres at integers), takes
+  the frame's noise bank at its own position, and so holds the whole frame's pixels there (to a gray level of
+  rounding, on flat ground; on a terrain the ground is sampled through a coarse grid of rays of its own). The
+  preview under a window is then the window averaged k×k: there, it is exactly the whole frame downsampled;
 * the **labels**, as render_frame's (:func:`perception.render.target_label`), each counted on a raster of object
   numbers over its own label box.
 
@@ -25,6 +30,10 @@ The degradation is drawn once per frame and applied to every part. A frame with 
 and returned as its :class:`~perception.scene.RenderedFrame`: bands tear rows sideways across the whole width,
 a failed link replaces the whole picture, and the banding and blank-frame checks of the detectors must see it
 (at ``banding_prob`` p a camera pays the full price in a fraction p of its frames).
+
+What a ROI frame does not show: whatever a detector would find in the ground texture alone, away from targets
+and speckles (over the tiled floor from 80 m the dark-blob detector finds ~4 such blobs a frame in the whole
+frame; the colour detector none over the terrain) — so its false alarms are at most the whole frame's.
 
 Scope: RGB, ground, targets and the per-frame degradation, what :class:`agent.sensors.camera.CameraSensor` draws;
 fires, smoke, occluders and thermal frames are render_frame's.
@@ -99,11 +108,11 @@ class _Scene:
             entry, ids, origin = drawn.get(i), None, (0, 0)
             if entry is not None:
                 box = entry[1].label_box(width, height)
-                if box[0] < box[2] and box[1] < box[3]:
+                near = [(k, shape) for k, _, _, shape in self.objects if _overlap(shape.box, box, slack=1.0)]
+                if len(near) > 1:  # something else is drawn there: who is on top of which pixel
                     ids, origin = np.zeros((box[3] - box[1], box[2] - box[0]), np.uint16), box[:2]
-                    for k, _, _, shape in self.objects:
-                        if _overlap(shape.box, box, slack=1.0):
-                            shape.draw(ids, k, cv2.LINE_8, offset=origin)
+                    for k, shape in near:
+                        shape.draw(ids, k, cv2.LINE_8, offset=origin)
             out.append(target_label(i, entry, ids, width, height, origin=origin))
         return out
 
@@ -203,12 +212,15 @@ def render_roi(
         frame_ground.layer(_pixel_map(s, offset), size, downsample=step), (0, 0, width, height), s, offset
     )
     if deg.noise_sigma > 0:
-        add_rgb_noise(preview, deg.noise_sigma * s, size, noise_offset(rng))
+        add_rgb_noise(preview, deg.noise_sigma, size, noise_offset(rng), average=step)
     whole = step * s == 1.0 and width % step == 0 and height % step == 0  # windows cover whole preview pixels
     extents = [shape.box for *_, shape in objects] + [speckle.box() for speckle in scene.speckles]
     at = noise_offset(rng)
     windows = []
     for x0, y0, x1, y1 in window_boxes(extents, width, height, grid=step if whole else 1):
+        if s == 1.0:  # the preview is the whole frame: a window is a view of it
+            windows.append(Window(x0, y0, preview[y0:y1, x0:x1]))
+            continue
         image = scene.paint(
             frame_ground.layer(_pixel_map(1.0, (x0, y0)), (x1 - x0, y1 - y0)), (x0, y0, x1, y1), 1.0, (x0, y0)
         )
