@@ -191,6 +191,7 @@ class Speckle:
     dark: bool
     gray: int = 0
 
+    @property
     def box(self) -> tuple[int, int, int, int]:
         """``(x0, y0, x1, y1)``: the pixels the speckle may cover."""
         r = max(self.axes)

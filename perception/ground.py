@@ -14,6 +14,13 @@ pyramid. A frame is made by sampling it through the camera geometry:
 
 Pixels whose ray does not meet the ground (above the horizon) are reported as sky.
 The texture's pixel ``(col, row)`` is the world point ``(n, e) = origin + (row, col)·resolution``.
+
+:func:`ground_view` works out how one frame sees the ground (:class:`FlatGround`: the mip level, the
+homography, the horizon; :class:`TerrainGround`); its ``layer(A, size)`` draws the frame, or any image whose
+pixels are the frame's under a pixel map ``A`` — a window (``A`` a shift), the whole view at a lower resolution
+(``A`` a scale), as :func:`perception.roi_render.render_roi` draws. An image whose pixels stand for the means of
+k×k frame pixels samples the frame's mip level averaged over the texels they cover (:func:`texel_box`,
+:meth:`GroundTexture.boxed`): the box filter of area averaging rather than the wider Gaussian of the next level.
 """
 
 from __future__ import annotations
@@ -25,7 +32,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["GroundTexture", "GroundLayer", "FlatGround", "TerrainGround", "ground_view", "render_ground"]
+__all__ = ["GroundTexture", "GroundLayer", "FlatGround", "TerrainGround", "ground_view"]
 
 
 def _periodic_noise(size: int, cells: int, rng: np.random.Generator) -> np.ndarray:
@@ -346,15 +353,3 @@ def ground_view(
         return FlatGround(texture, P, width, height, ground_height)
     fn = terrain.height if hasattr(terrain, "height") else terrain
     return TerrainGround(texture, P, width, height, fn)
-
-
-def render_ground(
-    texture: GroundTexture,
-    P: np.ndarray,
-    width: int,
-    height: int,
-    ground_height: float = 0.0,
-    terrain: Callable | object | None = None,
-) -> GroundLayer:
-    """Sample ``texture`` through the normalised projection ``P`` for the whole frame (see :func:`ground_view`)."""
-    return ground_view(texture, P, width, height, ground_height, terrain).layer()

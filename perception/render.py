@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from perception.degradation import Degradation, degrade
-from perception.ground import GroundLayer, GroundTexture, render_ground
+from perception.ground import GroundLayer, GroundTexture, ground_view
 from perception.pinhole import PinholeView, as_view
 from perception.scene import Fire, Occluder, RenderedFrame, Smoke, Target, TargetLabel, parse
 
@@ -306,7 +306,7 @@ def render_frame(
     deg = Degradation() if degradation is None else degradation
     ambient = ground.ambient_K
 
-    layer = render_ground(ground, view.P, width, height, ground_height, terrain)
+    layer = ground_view(ground, view.P, width, height, ground_height, terrain).layer()
     img = ground_rgb(layer) if rgb else None
     th = ground.temperature(cv2.extractChannel(layer.rgbt, 3)) if thermal else None
     if layer.sky is not None and th is not None:

@@ -214,7 +214,7 @@ def render_roi(
     if deg.noise_sigma > 0:
         add_rgb_noise(preview, deg.noise_sigma, size, noise_offset(rng), average=step)
     whole = step * s == 1.0 and width % step == 0 and height % step == 0  # windows cover whole preview pixels
-    extents = [shape.box for *_, shape in objects] + [speckle.box() for speckle in scene.speckles]
+    extents = [shape.box for *_, shape in objects] + [speckle.box for speckle in scene.speckles]
     at = noise_offset(rng)
     windows = []
     for x0, y0, x1, y1 in window_boxes(extents, width, height, grid=step if whole else 1):
