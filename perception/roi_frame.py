@@ -25,7 +25,7 @@ from perception.degradation import DegradationInfo
 from perception.detection import Detection
 from perception.scene import TargetLabel
 
-__all__ = ["Window", "RoiFrame"]
+__all__ = ["Window", "RoiFrame", "whole_view"]
 
 
 @dataclass(frozen=True)
@@ -101,3 +101,9 @@ class RoiFrame:
                     center = (d.center[0] + x0, d.center[1] + y0)
                     out.append(Detection(center, d.area, (round(bx + x0), round(by + y0), bw, bh), d.score))
         return out
+
+
+def whole_view(frame: np.ndarray | RoiFrame) -> np.ndarray:
+    """The whole view a frame shows: an image itself, or a :class:`RoiFrame`'s preview (what the frame-level
+    measures such as D(t) take, :mod:`perception.quality`)."""
+    return frame.preview if isinstance(frame, RoiFrame) else frame

@@ -29,7 +29,8 @@ The degradation is drawn once per frame and applied to every part. A frame with 
 **failed link** (``snow``, ``black``, ``banding``) is rendered whole by :func:`~perception.render.render_frame`
 and returned as its :class:`~perception.scene.RenderedFrame`: bands tear rows sideways across the whole width,
 a failed link replaces the whole picture, and the banding and blank-frame checks of the detectors must see it
-(at ``banding_prob`` p a camera pays the full price in a fraction p of its frames).
+(at ``banding_prob`` p a camera pays the full price in a fraction p of its frames). So is every frame of a camera
+no larger than the preview (``s = 1``): its preview would be the frame itself.
 
 What a ROI frame does not show: whatever a detector would find in the ground texture alone, away from targets
 and speckles (over the tiled floor from 80 m the dark-blob detector finds ~4 such blobs a frame in the whole
@@ -183,8 +184,13 @@ def render_roi(
     ground = default_ground(ground) if ground is None or isinstance(ground, str) else ground
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     deg = Degradation() if degradation is None else degradation
-    if deg.failed is not None or banding_episode(deg, rng):
-        whole = deg if deg.failed is not None else replace(deg, banding_prob=1.0)
+    s = preview_scale(width, height)
+    whole = None
+    if s == 1.0 or deg.failed is not None:  # no larger than its preview, or a failed link: as render_frame draws it
+        whole = deg
+    elif banding_episode(deg, rng):  # this frame has its banding episode
+        whole = replace(deg, banding_prob=1.0)
+    if whole is not None:
         return render_frame(
             view,
             width,
@@ -203,7 +209,6 @@ def render_roi(
         if (shape := project_object(view, target)) is not None
     ]
     scene = _Scene(objects, plan_speckles(deg, width, height, rng))
-    s = preview_scale(width, height)
     offset = (0.5 - 0.5 * s, 0.5 - 0.5 * s)
     size = (round(width * s), round(height * s))
     step = round(1.0 / s)
@@ -218,9 +223,6 @@ def render_roi(
     at = noise_offset(rng)
     windows = []
     for x0, y0, x1, y1 in window_boxes(extents, width, height, grid=step if whole else 1):
-        if s == 1.0:  # the preview is the whole frame: a window is a view of it
-            windows.append(Window(x0, y0, preview[y0:y1, x0:x1]))
-            continue
         image = scene.paint(
             frame_ground.layer(_pixel_map(1.0, (x0, y0)), (x1 - x0, y1 - y0)), (x0, y0, x1, y1), 1.0, (x0, y0)
         )

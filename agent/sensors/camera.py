@@ -67,7 +67,7 @@ from perception.pose import CameraMount, CameraPose, Gimbal
 from perception.pose_buffer import PoseBuffer, PoseSample, PoseTooNew, PoseTooOld
 from perception.quality import VideoQuality
 from perception.render import default_ground, render_frame
-from perception.roi_frame import RoiFrame
+from perception.roi_frame import RoiFrame, whole_view
 from perception.roi_render import render_roi
 from perception.rotations import rot_x, rot_y, rot_z
 from perception.scene import Target
@@ -158,7 +158,7 @@ class CameraSensor(BearingSource):
         self._telemetry(t, state)
         frame, labels = self._capture(t, state, truth)
         self.stats.frames += 1
-        self.last_quality = self.quality.update(frame.preview if isinstance(frame, RoiFrame) else frame)
+        self.last_quality = self.quality.update(whole_view(frame))
         if frame is not None:
             result = self.detector.detect(frame)
             if result.error is not None:
