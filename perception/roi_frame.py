@@ -2,10 +2,10 @@
 
 :func:`perception.roi_render.render_roi` draws only what the detectors need of a frame: a *preview* (the whole
 view at a lower resolution, what the frame-level measures work on) and, around everything drawn on the ground
-that a detector could respond to, *regions of interest* — rendered at full resolution as *windows* for the
-colour-blob detector, or cut from the preview for the dark-blob detector, which works at the preview's
-resolution. :class:`RoiFrame` holds them; the detectors (:mod:`perception.blobs`) take it in place of an image
-and report in frame pixels.
+that a detector could respond to, full-resolution *windows*. :class:`RoiFrame` holds them; the detectors
+(:mod:`perception.blobs`) take it in place of an image — the colour-blob detector looks in the windows, the
+dark-blob detector, which works at the preview's resolution, in the windows cut from the preview
+(:meth:`RoiFrame.crops`) — and report in frame pixels.
 
 Pixel maps (pixel centres at integers, DESIGN.md §3): a full-resolution window's pixel ``p'`` is frame pixel
 ``p' + (x0, y0)``; a pixel ``i`` of an image of the whole view at ``1/step`` of the frame's resolution covers

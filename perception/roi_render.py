@@ -176,7 +176,7 @@ def render_roi(
 ) -> RoiFrame | RenderedFrame:
     """The frame :func:`~perception.render.render_frame` would draw of ``targets`` (same arguments), as a
     preview and full-resolution windows around the targets and speckles; or the whole RGB frame for a banding
-    episode or a failed link (see the module docstring)."""
+    episode, a failed link or a camera no larger than its preview (see the module docstring)."""
     if width < 8 or height < 8:
         raise ValueError("image must be at least 8×8")
     targets = parse(targets, Target)
@@ -218,18 +218,18 @@ def render_roi(
     )
     if deg.noise_sigma > 0:
         add_rgb_noise(preview, deg.noise_sigma, size, noise_offset(rng), average=step)
-    whole = step * s == 1.0 and width % step == 0 and height % step == 0  # windows cover whole preview pixels
+    aligned = step * s == 1.0 and width % step == 0 and height % step == 0  # windows cover whole preview pixels
     extents = [shape.box for *_, shape in objects] + [speckle.box for speckle in scene.speckles]
     at = noise_offset(rng)
     windows = []
-    for x0, y0, x1, y1 in window_boxes(extents, width, height, grid=step if whole else 1):
+    for x0, y0, x1, y1 in window_boxes(extents, width, height, grid=step if aligned else 1):
         image = scene.paint(
             frame_ground.layer(_pixel_map(1.0, (x0, y0)), (x1 - x0, y1 - y0)), (x0, y0, x1, y1), 1.0, (x0, y0)
         )
         if deg.noise_sigma > 0:
             add_rgb_noise(image, deg.noise_sigma, (width, height), (at[0] + y0, at[1] + x0))
         windows.append(Window(x0, y0, image))
-        if whole:  # the preview there is the window downsampled, as the whole frame would be
+        if aligned:  # the preview there is the window downsampled, as the whole frame would be
             cell = ((x1 - x0) // step, (y1 - y0) // step)
             preview[y0 // step : y1 // step, x0 // step : x1 // step] = cv2.resize(
                 image, cell, interpolation=cv2.INTER_AREA
