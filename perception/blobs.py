@@ -13,6 +13,12 @@
 Both validate each frame (:func:`perception.frames.check_frame`); a rejected frame gives an empty
 :class:`~perception.detection.DetectionResult` with ``error`` set and is counted in ``rejected``.
 Frames are RGB uint8 (grayscale accepted by the dark-blob detector).
+
+Both also take a frame drawn in parts (:class:`~perception.roi_frame.RoiFrame`, from
+:func:`perception.roi_render.render_roi`) and run the same steps where it was drawn: the colour detector in its
+full-resolution windows, the dark detector in its preview — the whole view at the working size, checked for
+contrast and equalised whole as a downsampled frame is — cut to the windows; the banding rows are read on the
+preview. Detections are in frame pixels either way.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ import numpy as np
 from perception.detection import Detection, DetectionResult, ShapeFilter, blobs_from_mask
 from perception.frames import FrameError, RejectCounter, check_frame, to_gray
 from perception.quality import blind_rows
+from perception.roi_frame import RoiFrame
 
 __all__ = [
     "HsvRange",
@@ -38,9 +45,12 @@ __all__ = [
 _HUE_MAX = 179  # OpenCV 8-bit hue: 0..179 (degrees / 2)
 
 
-def _blind(gray: np.ndarray, threshold: float) -> np.ndarray | None:
-    rows = blind_rows(gray, threshold)
-    return rows if rows.any() else None
+def _drop_blind(result: DetectionResult, gray: np.ndarray, threshold: float, frame_height: int | None = None) -> None:
+    """Mark the rows of ``gray`` (the frame, or its preview for a frame of ``frame_height`` rows) inside a
+    banding episode blind and drop the detections there."""
+    rows = blind_rows(gray, threshold, frame_height=frame_height)
+    result.blind_rows = rows if rows.any() else None
+    result.drop_blind()
 
 
 @dataclass(frozen=True)
@@ -125,16 +135,26 @@ class ColorBlobDetector:
             out = cv2.dilate(out, np.ones((3, 3), np.uint8), iterations=self.dilate)
         return out
 
+    def blobs(self, image: np.ndarray) -> list[Detection]:
+        """Steps 1-5 on an RGB image: the blobs of :meth:`mask` that pass the shape tests."""
+        return blobs_from_mask(self.mask(image), self.shape)
+
     def detect(self, frame: object) -> DetectionResult:
-        try:
-            image = check_frame(frame, self.expected_shape, dtypes=(np.uint8,), channels=(3,))
-        except FrameError as exc:
-            return DetectionResult(error=self.rejected.record(exc))
-        mask = self.mask(image)
-        result = DetectionResult(blobs_from_mask(mask, self.shape), mask=mask)
+        """Blobs of an RGB frame, or of the windows of a :class:`~perception.roi_frame.RoiFrame` (its banding
+        rows from its preview)."""
+        if isinstance(frame, RoiFrame):
+            result = DetectionResult(frame.detections(frame.windows, lambda w: self.blobs(w.image)), size=frame.size)
+            gray, height = to_gray(frame.preview), frame.height
+        else:
+            try:
+                image = check_frame(frame, self.expected_shape, dtypes=(np.uint8,), channels=(3,))
+            except FrameError as exc:
+                return DetectionResult(error=self.rejected.record(exc))
+            mask = self.mask(image)
+            result = DetectionResult(blobs_from_mask(mask, self.shape), mask=mask)
+            gray, height = to_gray(image), None
         if self.reject_banding:
-            result.blind_rows = _blind(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY), self.banding_row_threshold)
-            result.drop_blind()
+            _drop_blind(result, gray, self.banding_row_threshold, height)
         return result
 
 
@@ -208,7 +228,10 @@ class DarkBlobDetector:
 
     def binarise(self, small_gray: np.ndarray) -> np.ndarray:
         """Equalise and threshold (dark = 255)."""
-        equalised = cv2.equalizeHist(small_gray)
+        return self.foreground(cv2.equalizeHist(small_gray))
+
+    def foreground(self, equalised: np.ndarray) -> np.ndarray:
+        """Threshold an equalised image (dark = 255) and open it."""
         _, binary = cv2.threshold(equalised, self.threshold, 255, cv2.THRESH_BINARY_INV)
         if self.open_size > 1:
             kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (self.open_size, self.open_size))
@@ -216,17 +239,32 @@ class DarkBlobDetector:
         return binary
 
     def detect(self, frame: object) -> DetectionResult:
-        try:
-            image = check_frame(frame, self.expected_shape, dtypes=(np.uint8,), channels=(1, 3))
-        except FrameError as exc:
-            return DetectionResult(error=self.rejected.record(exc))
-        small, scale = self.preprocess(image)
+        """Blobs of an RGB or gray frame, or of a :class:`~perception.roi_frame.RoiFrame`: its preview (the whole
+        view at about the working size) is the working image — checked for contrast and equalised whole, as a
+        downsampled frame is — and blobs are sought in its regions of interest."""
+        if isinstance(frame, RoiFrame):
+            image, height = frame.preview, frame.height
+            small, _ = self.preprocess(image)
+            scale = (frame.width / small.shape[1], frame.height / small.shape[0])
+        else:
+            try:
+                image = check_frame(frame, self.expected_shape, dtypes=(np.uint8,), channels=(1, 3))
+            except FrameError as exc:
+                return DetectionResult(error=self.rejected.record(exc))
+            height = image.shape[0]
+            small, scale = self.preprocess(image)
         if float(cv2.meanStdDev(small)[1][0, 0]) < self.min_contrast:
-            blind = np.ones(image.shape[0], bool)  # no picture: nothing was observed
+            blind = np.ones(height, bool)  # no picture: nothing was observed
             return DetectionResult([], mask=np.zeros_like(small), scale=scale, blind_rows=blind)
-        binary = self.binarise(small)
-        result = DetectionResult(blobs_from_mask(binary, self.shape, scale), binary, scale=scale)
+        equalised = cv2.equalizeHist(small)
+        if isinstance(frame, RoiFrame):
+            found = frame.detections(
+                frame.crops(equalised), lambda w: blobs_from_mask(self.foreground(w.image), self.shape, w.step)
+            )
+            result = DetectionResult(found, scale=scale, size=frame.size)
+        else:
+            binary = self.foreground(equalised)
+            result = DetectionResult(blobs_from_mask(binary, self.shape, scale), binary, scale=scale)
         if self.reject_banding:
-            result.blind_rows = _blind(to_gray(image), self.banding_row_threshold)
-            result.drop_blind()
+            _drop_blind(result, to_gray(image), self.banding_row_threshold, height)
         return result

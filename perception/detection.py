@@ -41,13 +41,23 @@ class DetectionResult:
     rejected frame); ``scale = (sx, sy)`` is input pixels per mask pixel. ``error`` is the
     :class:`~perception.frames.FrameError` reason when the frame was rejected, else ``None``.
     ``blind_rows`` (bool per input-frame row, or ``None``) marks rows where the detector could not
-    see (a banding episode, a blank frame): an object there was not observed, rather than absent."""
+    see (a banding episode, a blank frame): an object there was not observed, rather than absent.
+    ``size`` is the input frame's ``(width, height)`` when there is no mask to tell it (see :attr:`frame_size`)."""
 
     detections: list[Detection] = field(default_factory=list)
     mask: np.ndarray | None = None
     error: str | None = None
     scale: tuple[float, float] = (1.0, 1.0)
     blind_rows: np.ndarray | None = None
+    size: tuple[int, int] | None = None
+
+    @property
+    def frame_size(self) -> tuple[int, int] | None:
+        """``(width, height)`` of the input frame: ``size``, else the mask's size times ``scale``; ``None``
+        for a rejected frame."""
+        if self.size is not None or self.mask is None:
+            return self.size
+        return round(self.mask.shape[1] * self.scale[0]), round(self.mask.shape[0] * self.scale[1])
 
     def is_blind(self, v: float) -> bool:
         """Whether input-frame row ``v`` lies in a blind band."""

@@ -14,6 +14,13 @@ pyramid. A frame is made by sampling it through the camera geometry:
 
 Pixels whose ray does not meet the ground (above the horizon) are reported as sky.
 The texture's pixel ``(col, row)`` is the world point ``(n, e) = origin + (row, col)·resolution``.
+
+:func:`ground_view` works out how one frame sees the ground (:class:`FlatGround`: the mip level, the
+homography, the horizon; :class:`TerrainGround`); its ``layer(A, size)`` draws the frame, or any image whose
+pixels are the frame's under a pixel map ``A`` — a window (``A`` a shift), the whole view at a lower resolution
+(``A`` a scale), as :func:`perception.roi_render.render_roi` draws. An image whose pixels stand for the means of
+k×k frame pixels samples the frame's mip level averaged over the texels they cover (:func:`texel_box`,
+:meth:`GroundTexture.boxed`): the box filter of area averaging rather than the wider Gaussian of the next level.
 """
 
 from __future__ import annotations
@@ -25,7 +32,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["GroundTexture", "GroundLayer", "render_ground"]
+__all__ = ["GroundTexture", "GroundLayer", "FlatGround", "TerrainGround", "ground_view"]
 
 
 def _periodic_noise(size: int, cells: int, rng: np.random.Generator) -> np.ndarray:
@@ -91,6 +98,7 @@ class GroundTexture:
             tile = np.ascontiguousarray(cv2.pyrDown(padded)[4:-4, 4:-4])
         for level in self.levels:
             level.setflags(write=False)
+        self._boxed: dict[tuple[int, int], np.ndarray] = {}
 
     @property
     def period_m(self) -> float:
@@ -131,6 +139,18 @@ class GroundTexture:
         temp = 128 + 4 * (mottle - 0.5)
         return np.dstack([np.clip(rgb, 0, 255), np.clip(temp, 0, 255)]).astype(np.uint8)
 
+    def boxed(self, level: int, box: int) -> np.ndarray:
+        """Mip level ``level`` averaged over ``box``×``box`` texels (``cv2.INTER_AREA``), built once: the box
+        filter of area averaging, for images whose pixels are means of finer pixels (:func:`texel_box`), where the
+        next mip level would apply the wider Gaussian of ``pyrDown``."""
+        key = (level, box)
+        if key not in self._boxed:
+            tex = self.levels[level]
+            boxed = cv2.resize(tex, (tex.shape[1] // box, tex.shape[0] // box), interpolation=cv2.INTER_AREA)
+            boxed.setflags(write=False)
+            self._boxed[key] = boxed
+        return self._boxed[key]
+
     def level_for(self, gsd_m: float) -> int:
         """Mip level whose texel is no smaller than half the ground sample distance."""
         if not math.isfinite(gsd_m) or gsd_m <= 2.0 * self.resolution_m:
@@ -154,52 +174,108 @@ class GroundLayer:
     sky: np.ndarray | None
 
 
-def _window(texture: GroundTexture, level: int, n_min: float, e_min: float) -> tuple[np.ndarray, np.ndarray]:
-    """Texture level and the affine map ``A`` from its (col, row, 1) to world (n, e, 1)."""
+def _window(
+    texture: GroundTexture, level: int, n_min: float, e_min: float, box: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """Texture level (averaged over ``box``×``box`` texels, :meth:`GroundTexture.boxed`) and the affine map ``A``
+    from its (col, row, 1) to world (n, e, 1). A texel of the averaged level is centred on the middle of the
+    ``box``×``box`` texels it averages, ``(box − 1)/2`` texels of the level from its first one."""
+    tex = texture.levels[level]
+    if box > 1 and tex.shape[0] % box == 0:
+        tex = texture.boxed(level, box)
+    else:
+        box = 1
     res = texture.resolution_m * 2**level
     period = texture.period_m
     n0 = texture.origin_ne[0] + math.floor((n_min - texture.origin_ne[0]) / period) * period
     e0 = texture.origin_ne[1] + math.floor((e_min - texture.origin_ne[1]) / period) * period
+    if box > 1:
+        n0, e0, res = n0 + 0.5 * (box - 1) * res, e0 + 0.5 * (box - 1) * res, box * res
     A = np.array([[0.0, res, n0], [res, 0.0, e0], [0.0, 0.0, 1.0]])
-    return texture.levels[level], A
+    return tex, A
 
 
-def _flat(texture: GroundTexture, P: np.ndarray, width: int, height: int, h0: float) -> GroundLayer:
-    G = np.column_stack([P[:, 0], P[:, 1], -h0 * P[:, 2] + P[:, 3]])
-    Ginv = np.linalg.inv(G)
-    x1, y1 = width - 0.5, height - 0.5
-    corners = np.array([[-0.5, -0.5, 1], [x1, -0.5, 1], [x1, y1, 1], [-0.5, y1, 1]])
-    w = corners @ Ginv[2]
-    sky = None
-    centre = np.array([(width - 1) / 2, (height - 1) / 2, 1.0])
-    pts = np.stack([centre, centre + [1, 0, 0], centre + [0, 1, 0]]) @ Ginv.T
-    if np.all(pts[:, 2] > 0):
-        ne = pts[:, :2] / pts[:, 2:]
-        d1, d2 = ne[1] - ne[0], ne[2] - ne[0]
-        gsd = math.sqrt(abs(d1[0] * d2[1] - d1[1] * d2[0]))
-    else:
-        gsd = float("inf")
-    level = texture.level_for(gsd)
-    if np.all(w > 1e-12):
-        ground = corners @ Ginv.T
-        ne = ground[:, :2] / ground[:, 2:]
-        (n_min, e_min), (n_max, e_max) = ne.min(axis=0), ne.max(axis=0)
-        tex, A = _window(texture, level, n_min, e_min)
-        span = 2 * texture.period_m
-        inside = n_max - A[0, 2] < span - 2 * A[0, 1] and e_max - A[1, 2] < span - 2 * A[0, 1]
-        border = cv2.BORDER_REPLICATE if inside else cv2.BORDER_WRAP
-    else:
-        tex, A = _window(texture, level, 0.0, 0.0)
-        border = cv2.BORDER_WRAP
-        u = np.arange(width, dtype=np.float32)
-        v = np.arange(height, dtype=np.float32)[:, None]
-        sky = (Ginv[2, 0] * u + Ginv[2, 1] * v + Ginv[2, 2]) <= 1e-12
-    rgbt = cv2.warpPerspective(tex, G @ A, (width, height), flags=cv2.INTER_LINEAR, borderMode=border)
-    return GroundLayer(rgbt, sky)
+def texel_box(texture: GroundTexture, level: int, gsd_m: float, downsample: int) -> int:
+    """Texels of mip ``level`` to average (per axis) for an image ``downsample`` times coarser than one of ground
+    sample distance ``gsd_m``: the ``downsample·gsd / texel`` texels one of its pixels covers, rounded, at least
+    1 and at most ``downsample`` (the texel of the level that suits ``gsd`` is at least ``gsd/2``)."""
+    if downsample <= 1 or not math.isfinite(gsd_m):
+        return 1
+    texel = texture.resolution_m * 2**level
+    return int(min(downsample, max(1, round(downsample * gsd_m / texel))))
+
+
+class FlatGround:
+    """How one frame sees flat ground at height ``h0``: the mip level, the homography from its texels to the
+    frame's pixels and the horizon, worked out once; :meth:`layer` warps the frame, or any part of it."""
+
+    def __init__(self, texture: GroundTexture, P: np.ndarray, width: int, height: int, h0: float):
+        G = np.column_stack([P[:, 0], P[:, 1], -h0 * P[:, 2] + P[:, 3]])
+        Ginv = np.linalg.inv(G)
+        x1, y1 = width - 0.5, height - 0.5
+        corners = np.array([[-0.5, -0.5, 1], [x1, -0.5, 1], [x1, y1, 1], [-0.5, y1, 1]])
+        w = corners @ Ginv[2]
+        centre = np.array([(width - 1) / 2, (height - 1) / 2, 1.0])
+        pts = np.stack([centre, centre + [1, 0, 0], centre + [0, 1, 0]]) @ Ginv.T
+        if np.all(pts[:, 2] > 0):
+            ne = pts[:, :2] / pts[:, 2:]
+            d1, d2 = ne[1] - ne[0], ne[2] - ne[0]
+            gsd = math.sqrt(abs(d1[0] * d2[1] - d1[1] * d2[0]))
+        else:
+            gsd = float("inf")
+        self.gsd, self.level = gsd, texture.level_for(gsd)
+        self.horizon = None  # Ginv[2] when the horizon crosses the frame: pixel p is sky where Ginv[2]·p ≤ 0
+        self.origin = (0.0, 0.0)  # where the texture window starts (n, e)
+        if np.all(w > 1e-12):
+            ground = corners @ Ginv.T
+            ne = ground[:, :2] / ground[:, 2:]
+            (n_min, e_min), (n_max, e_max) = ne.min(axis=0), ne.max(axis=0)
+            self.origin = (n_min, e_min)
+            tex, A = _window(texture, self.level, n_min, e_min)
+            span = 2 * texture.period_m
+            inside = n_max - A[0, 2] < span - 2 * A[0, 1] and e_max - A[1, 2] < span - 2 * A[0, 1]
+            self.border = cv2.BORDER_REPLICATE if inside else cv2.BORDER_WRAP
+        else:
+            tex, A = _window(texture, self.level, 0.0, 0.0)
+            self.border = cv2.BORDER_WRAP
+            self.horizon = Ginv[2]
+        self.texture, self.G, self.M, self.size = texture, G, G @ A, (width, height)
+        self._tex = tex
+
+    def layer(
+        self, A: np.ndarray | None = None, size: tuple[int, int] | None = None, downsample: int = 1
+    ) -> GroundLayer:
+        """The ground of the frame (``A = None``), or of the ``size = (w, h)`` image whose pixel ``p'`` is frame
+        pixel ``p`` at ``p' ~ A·p`` (``A`` a 3×3 pixel map: a window, a lower resolution). An image whose pixels
+        stand for ``downsample``×``downsample`` frame pixels each (their mean, as ``cv2.INTER_AREA`` makes it)
+        samples the frame's mip level averaged over the texels those pixels cover
+        (:func:`texel_box`)."""
+        width, height = self.size if size is None else size
+        tex, M, horizon = self._tex, self.M, self.horizon
+        box = texel_box(self.texture, self.level, self.gsd, downsample)
+        if box > 1:
+            tex, window = _window(self.texture, self.level, *self.origin, box)
+            M = self.G @ window
+        if A is not None:
+            M = A @ M
+            horizon = None if horizon is None else horizon @ np.linalg.inv(A)
+        sky = None
+        if horizon is not None:
+            u = np.arange(width, dtype=np.float32)
+            v = np.arange(height, dtype=np.float32)[:, None]
+            sky = (horizon[0] * u + horizon[1] * v + horizon[2]) <= 1e-12
+        rgbt = cv2.warpPerspective(tex, M, (width, height), flags=cv2.INTER_LINEAR, borderMode=self.border)
+        return GroundLayer(rgbt, sky)
 
 
 def _terrain(
-    texture: GroundTexture, P: np.ndarray, width: int, height: int, height_fn: Callable, step: int = 8
+    texture: GroundTexture,
+    P: np.ndarray,
+    width: int,
+    height: int,
+    height_fn: Callable,
+    step: int = 8,
+    downsample: int = 1,
 ) -> GroundLayer:
     M = P[:, :3]
     Minv = np.linalg.inv(M)
@@ -225,13 +301,14 @@ def _terrain(
     e = C[1] + lam * rays[..., 1]
     ci, cj = hc // 2, wc // 2
     gsd = math.hypot(n[ci, cj + 1] - n[ci, cj], e[ci, cj + 1] - e[ci, cj]) * wc / width
-    level = texture.level_for(gsd)
+    level = texture.level_for(gsd / downsample)
+    box = texel_box(texture, level, gsd / downsample, downsample)
     if ok.any():
-        tex, A = _window(texture, level, float(n[ok].min()), float(e[ok].min()))
+        tex, A = _window(texture, level, float(n[ok].min()), float(e[ok].min()), box)
     else:
-        tex, A = _window(texture, level, 0.0, 0.0)
+        tex, A = _window(texture, level, 0.0, 0.0, box)
     res = A[0, 1]
-    period_px = texture.size_px / 2**level
+    period_px = texture.period_m / res
     mx = np.where(ok, (e - A[1, 2]) / res, 0.0).astype(np.float32)
     my = np.where(ok, (n - A[0, 2]) / res, 0.0).astype(np.float32)
     map_x = cv2.resize(mx, (width, height), interpolation=cv2.INTER_LINEAR)
@@ -246,19 +323,33 @@ def _terrain(
     return GroundLayer(rgbt, sky)
 
 
-def render_ground(
+class TerrainGround:
+    """How one frame sees a terrain ``h(n, e)``: :meth:`layer` casts the coarse grid of rays of its image (a
+    window's grid nodes are its own, so its texture agrees with the whole frame's to a fraction of a texel)."""
+
+    def __init__(self, texture: GroundTexture, P: np.ndarray, width: int, height: int, height_fn: Callable):
+        self.texture, self.P, self.size, self.height_fn = texture, P, (width, height), height_fn
+
+    def layer(
+        self, A: np.ndarray | None = None, size: tuple[int, int] | None = None, downsample: int = 1
+    ) -> GroundLayer:
+        """As :meth:`FlatGround.layer` (the ground sample distance is the image's, ÷ ``downsample``)."""
+        P = self.P if A is None else A @ self.P
+        return _terrain(self.texture, P, *(self.size if size is None else size), self.height_fn, downsample=downsample)
+
+
+def ground_view(
     texture: GroundTexture,
     P: np.ndarray,
     width: int,
     height: int,
     ground_height: float = 0.0,
     terrain: Callable | object | None = None,
-) -> GroundLayer:
-    """Sample ``texture`` through the normalised projection ``P`` (depth = ``P[2]·[X; 1]`` > 0).
-
-    ``terrain`` is ``None`` (flat ground at ``ground_height`` m above the NED origin), an object
-    with ``height(n, e)`` (e.g. :class:`perception.terrain.HillsTerrain`) or a callable ``h(n, e)``."""
+) -> FlatGround | TerrainGround:
+    """How the ``width``×``height`` frame of the normalised projection ``P`` (depth = ``P[2]·[X; 1]`` > 0) sees
+    ``texture`` on ``terrain``: ``None`` (flat ground at ``ground_height`` m above the NED origin), an object with
+    ``height(n, e)`` (e.g. :class:`perception.terrain.HillsTerrain`) or a callable ``h(n, e)``."""
     if terrain is None:
-        return _flat(texture, P, width, height, ground_height)
+        return FlatGround(texture, P, width, height, ground_height)
     fn = terrain.height if hasattr(terrain, "height") else terrain
-    return _terrain(texture, P, width, height, fn)
+    return TerrainGround(texture, P, width, height, fn)

@@ -223,17 +223,14 @@ class PersistentDetector:
 
     def detect(self, frame: object) -> DetectionResult:
         raw = self.detector.detect(frame)
-        size = None
-        if raw.mask is not None:
-            size = (round(raw.mask.shape[1] * raw.scale[0]), round(raw.mask.shape[0] * raw.scale[1]))
         if raw.error is not None:
             blind = lambda u, v: True  # noqa: E731 - a rejected frame observed nothing
         else:
             blind = (lambda u, v: raw.is_blind(v)) if raw.blind_rows is not None else None
-        confirmed = self.filter.update_frame(raw.detections, size, blind)
+        confirmed = self.filter.update_frame(raw.detections, raw.frame_size, blind)
         out = [
             Detection(center=p.x, area=p.area, bbox=p.bbox, score=p.frame_count / self.filter.max_count)
             for p in confirmed
             if self.report_hidden or p.found_this_frame
         ]
-        return DetectionResult(out, mask=raw.mask, error=raw.error, scale=raw.scale)
+        return DetectionResult(out, mask=raw.mask, error=raw.error, scale=raw.scale, size=raw.size)

@@ -67,18 +67,24 @@ def noisy_rows(gray: np.ndarray, threshold: float = 0.05, window: int = 9) -> np
     return np.convolve(noisy.astype(np.float32), np.ones(window, np.float32), mode="same") > 0
 
 
-def blind_rows(gray: np.ndarray, threshold: float = 0.05, work_height: int = 240) -> np.ndarray:
+def blind_rows(
+    gray: np.ndarray, threshold: float = 0.05, work_height: int = 240, frame_height: int | None = None
+) -> np.ndarray:
     """:func:`noisy_rows` of a grayscale frame of any size, measured at ``work_height`` lines
-    (INTER_AREA) and returned per row of the input frame."""
+    (INTER_AREA) and returned per row of a frame of ``frame_height`` rows (default: the input's, but
+    ``gray`` may be the whole frame at a lower resolution)."""
     height, width = gray.shape
+    frame_height = height if frame_height is None else frame_height
     small = gray
     if height != work_height:
         size = (max(1, round(width * work_height / height)), work_height)
         small = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
     rows = noisy_rows(small, threshold)
-    if height == work_height:
+    if frame_height == work_height:
         return rows
-    index = np.clip(((np.arange(height) + 0.5) * work_height / height - 0.5).round().astype(int), 0, work_height - 1)
+    index = np.clip(
+        ((np.arange(frame_height) + 0.5) * work_height / frame_height - 0.5).round().astype(int), 0, work_height - 1
+    )
     return rows[index]
 
 

@@ -22,14 +22,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from functools import lru_cache
+from dataclasses import dataclass
+from functools import cached_property, lru_cache
 
 import cv2
 import numpy as np
 
 from perception.degradation import Degradation
 from perception.degrade import degrade
-from perception.ground import GroundTexture, render_ground
+from perception.ground import GroundLayer, GroundTexture, ground_view
 from perception.pinhole import PinholeView, as_view
 from perception.scene import Fire, Occluder, RenderedFrame, Smoke, Target, TargetLabel, parse
 
@@ -40,10 +41,15 @@ __all__ = [
     "Smoke",
     "TargetLabel",
     "RenderedFrame",
+    "Projected",
     "default_ground",
+    "ground_rgb",
+    "painter_order",
+    "project_object",
     "render_frame",
     "render_rgb",
     "render_thermal",
+    "target_label",
 ]
 
 NEAR_M = 0.05  # near clipping distance (chosen here)
@@ -54,6 +60,8 @@ VISIBLE_FRACTION = 0.5  # a target at least this unoccluded counts as visible (c
 SMOKE_OPAQUE = 0.5  # smoke alpha at the target centre above which it is hidden (chosen here)
 SMOKE_IR = 0.1  # fraction of the smoke opacity seen by the thermal camera (chosen here)
 _SHIFT = 4  # sub-pixel bits for OpenCV drawing
+_ANGLES = np.linspace(0.0, 2 * math.pi, 24, endpoint=False)
+_RIM = np.column_stack([np.cos(_ANGLES), np.sin(_ANGLES), np.zeros_like(_ANGLES)])  # a disc's unit rim, NED
 _PAD = 32
 
 
@@ -131,8 +139,47 @@ def _fixed(points: np.ndarray) -> np.ndarray:
     return np.round((pts + 0.0) * (1 << _SHIFT)).astype(np.int32).reshape(-1, 1, 2)
 
 
-def _draw_object(images, values, view: PinholeView, obj: Target):
-    """Draw one target/occluder into each image with its value; returns (centre, depth, radius_px, drawer)."""
+@dataclass(frozen=True)
+class Projected:
+    """A target or occluder as the camera sees it, in frame pixels: its centre, depth, apparent radius and,
+    for a disc, its projected outline (``None`` for a sphere: a circle of that radius)."""
+
+    centre: np.ndarray
+    depth: float
+    radius: float
+    outline: np.ndarray | None = None
+
+    @cached_property
+    def box(self) -> tuple[float, float, float, float]:
+        """``(x0, y0, x1, y1)``: the pixels the object covers."""
+        if self.outline is not None:
+            (x0, y0), (x1, y1) = self.outline.min(axis=0), self.outline.max(axis=0)
+            return float(x0), float(y0), float(x1), float(y1)
+        u, v, r = float(self.centre[0]), float(self.centre[1]), self.radius
+        return u - r, v - r, u + r, v + r
+
+    def label_box(self, width: int, height: int) -> tuple[int, int, int, int]:
+        """``(x0, y0, x1, y1)``, clipped to the frame: where its label counts the pixels left visible."""
+        u, v = float(self.centre[0]), float(self.centre[1])
+        r = int(math.ceil(self.radius)) + 2
+        return max(0, int(u) - r), max(0, int(v) - r), min(width, int(u) + r + 1), min(height, int(v) + r + 1)
+
+    def draw(self, img: np.ndarray, value, line: int = cv2.LINE_8, scale: float = 1.0, offset=(0, 0)) -> None:
+        """Fill the object into ``img``, whose pixel ``p'`` is frame pixel ``p`` at ``p' = scale·p − offset``."""
+        if self.outline is not None:
+            cv2.fillPoly(img, [_fixed(self.outline * scale - offset)], value, line, _SHIFT)
+        else:
+            c = _fixed(self.centre * scale - offset).reshape(2)
+            cv2.circle(
+                img, (int(c[0]), int(c[1])), max(1, round(self.radius * scale * (1 << _SHIFT))), value, -1, line, _SHIFT
+            )
+
+
+def project_object(view: PinholeView, obj: Target) -> Projected | None:
+    """The projection of a target or occluder; ``None`` behind the near plane or around the camera.
+
+    A ``"sphere"`` has the apparent radius ``f·tan(asin(r/d))``; a ``"disc"`` lying flat is its projected
+    outline (24 points of its rim, clipped to the near plane), with the radius of the circle of equal area."""
     pos = np.asarray(obj.position, float)
     cam = view.R @ pos + view.t
     dist = float(np.linalg.norm(cam))
@@ -140,27 +187,64 @@ def _draw_object(images, values, view: PinholeView, obj: Target):
         return None
     uvw = view.K @ cam
     centre = uvw[:2] / uvw[2]
-    if obj.shape == "disc":
-        a = np.linspace(0.0, 2 * math.pi, 24, endpoint=False)
-        ring = pos + obj.radius_m * np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)])
-        poly = _clip_project(view, ring)
-        if poly is None:
-            return None
-        radius = float(np.sqrt(max(cv2.contourArea(poly.astype(np.float32)), 0.0) / math.pi))
+    if obj.shape != "disc":
+        return Projected(centre, float(cam[2]), view.focal * math.tan(math.asin(min(obj.radius_m / dist, 1.0))))
+    poly = _clip_project(view, pos + obj.radius_m * _RIM)
+    if poly is None:
+        return None
+    radius = float(np.sqrt(max(cv2.contourArea(poly.astype(np.float32)), 0.0) / math.pi))
+    return Projected(centre, float(cam[2]), radius, poly)
 
-        def draw(img, value, line=cv2.LINE_8, offset=(0, 0)):
-            cv2.fillPoly(img, [_fixed(poly - offset)], value, line, _SHIFT)
-    else:
-        radius = view.focal * math.tan(math.asin(min(obj.radius_m / dist, 1.0)))
 
-        def draw(img, value, line=cv2.LINE_8, offset=(0, 0)):
-            c = _fixed(centre - offset).reshape(2)
-            cv2.circle(img, (int(c[0]), int(c[1])), max(1, round(radius * (1 << _SHIFT))), value, -1, line, _SHIFT)
+def painter_order(view: PinholeView, targets: Sequence[Target], occluders: Sequence[Occluder] = ()) -> list[tuple]:
+    """``(object, target index or -1 for an occluder)``, farthest from the camera first (painter's order)."""
+    objects = [(t, i) for i, t in enumerate(targets)] + [(o, -1) for o in occluders]
+    objects.sort(key=lambda item: -float(np.linalg.norm(np.asarray(item[0].position, float) - view.center)))
+    return objects
 
-    for img, value, line in zip(images, values, (cv2.LINE_AA, cv2.LINE_8, cv2.LINE_8), strict=False):
-        if img is not None:
-            draw(img, value, line)
-    return centre, float(cam[2]), radius, draw
+
+def target_label(
+    index: int,
+    drawn: tuple[int, Projected] | None,
+    ids: np.ndarray | None,
+    width: int,
+    height: int,
+    alpha: np.ndarray | None = None,
+    origin: tuple[int, int] = (0, 0),
+) -> TargetLabel:
+    """The label of target ``index``, drawn as object ``k`` (``drawn = (k, projection)``, ``None``: not drawn).
+
+    ``ids`` holds the object number of every pixel of the frame region starting at pixel ``origin`` (it must
+    cover the target's :meth:`Projected.label_box`; ``None``: no other object is drawn there); the visible
+    fraction is the share of the target's own pixels there that still show it. ``alpha``: the frame's smoke
+    opacity, or ``None``."""
+    if drawn is None:
+        return TargetLabel(index, (math.nan, math.nan), math.nan, 0.0, False, False, 0.0)
+    k, shape = drawn
+    u, v = float(shape.centre[0]), float(shape.centre[1])
+    in_view = -0.5 <= u < width - 0.5 and -0.5 <= v < height - 0.5
+    x0, y0, x1, y1 = shape.label_box(width, height)
+    fraction = 0.0
+    if x0 < x1 and y0 < y1:
+        alone = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        shape.draw(alone, 1, cv2.LINE_8, offset=(x0, y0))
+        total = int(np.count_nonzero(alone))
+        ox, oy = origin
+        seen = (
+            total if ids is None else int(np.count_nonzero(ids[y0 - oy : y1 - oy, x0 - ox : x1 - ox][alone > 0] == k))
+        )
+        fraction = seen / total if total else 0.0
+    smoky = alpha is not None and in_view and alpha[int(round(v)), int(round(u))] > SMOKE_OPAQUE
+    visible = in_view and fraction >= VISIBLE_FRACTION and not smoky
+    return TargetLabel(index, (u, v), shape.depth, shape.radius, in_view, visible, fraction)
+
+
+def ground_rgb(layer: GroundLayer) -> np.ndarray:
+    """The RGB image of a ground layer, sky filled in."""
+    img = cv2.cvtColor(layer.rgbt, cv2.COLOR_RGBA2RGB)
+    if layer.sky is not None:
+        img[layer.sky] = SKY_RGB
+    return img
 
 
 def _smoke_alpha(view: PinholeView, puffs: list[Smoke], width: int, height: int):
@@ -224,14 +308,11 @@ def render_frame(
     deg = Degradation() if degradation is None else degradation
     ambient = ground.ambient_K
 
-    layer = render_ground(ground, view.P, width, height, ground_height, terrain)
-    img = cv2.cvtColor(layer.rgbt, cv2.COLOR_RGBA2RGB) if rgb else None
+    layer = ground_view(ground, view.P, width, height, ground_height, terrain).layer()
+    img = ground_rgb(layer) if rgb else None
     th = ground.temperature(cv2.extractChannel(layer.rgbt, 3)) if thermal else None
-    if layer.sky is not None:
-        if img is not None:
-            img[layer.sky] = SKY_RGB
-        if th is not None:
-            th[layer.sky] = SKY_K
+    if layer.sky is not None and th is not None:
+        th[layer.sky] = SKY_K
 
     fire_mask = np.zeros((height, width), bool)
     height_fn = _height_fn(terrain, ground_height)
@@ -253,15 +334,20 @@ def render_frame(
             if th is not None:
                 np.copyto(th[y0:y1, x0:x1], heat * flicker[dy + y0 : dy + y1, dx + x0 : dx + x1], where=box)
 
-    objects = [(t, i) for i, t in enumerate(targets)] + [(o, -1) for o in occluders]
-    objects.sort(key=lambda item: -float(np.linalg.norm(np.asarray(item[0].position, float) - view.center)))
+    objects = painter_order(view, targets, occluders)
     ids = np.zeros((height, width), np.uint16) if objects else None
-    drawn: dict[int, tuple] = {}
+    drawn: dict[int, tuple[int, Projected]] = {}
     for k, (obj, index) in enumerate(objects, start=1):
+        shape = project_object(view, obj)
+        if shape is None:
+            continue
         temp = obj.temperature_K if obj.temperature_K is not None else ambient + (TARGET_WARMTH_K if index >= 0 else -3)
-        res = _draw_object((img, th, ids), (tuple(int(c) for c in obj.rgb), float(temp), k), view, obj)
-        if res is not None and index >= 0:
-            drawn[index] = (k, *res)
+        values = (tuple(int(c) for c in obj.rgb), float(temp), k)
+        for image, value, line in zip((img, th, ids), values, (cv2.LINE_AA, cv2.LINE_8, cv2.LINE_8), strict=True):
+            if image is not None:
+                shape.draw(image, value, line)
+        if index >= 0:
+            drawn[index] = (k, shape)
     if ids is not None and polys and x0 < x1 and y0 < y1:
         fire_mask[y0:y1, x0:x1] &= ids[y0:y1, x0:x1] == 0
 
@@ -276,27 +362,7 @@ def render_frame(
             patch = th[sy0:sy1, sx0:sx1]
             patch[:] = patch * (1.0 - SMOKE_IR * a) + ambient * SMOKE_IR * a
 
-    labels = []
-    for index in range(len(targets)):
-        if index not in drawn:
-            labels.append(TargetLabel(index, (math.nan, math.nan), math.nan, 0.0, False, False, 0.0))
-            continue
-        k, centre, depth, radius, draw = drawn[index]
-        u, v = float(centre[0]), float(centre[1])
-        in_view = -0.5 <= u < width - 0.5 and -0.5 <= v < height - 0.5
-        r = int(math.ceil(radius)) + 2
-        x0, x1 = max(0, int(u) - r), min(width, int(u) + r + 1)
-        y0, y1 = max(0, int(v) - r), min(height, int(v) + r + 1)
-        fraction = 0.0
-        if x0 < x1 and y0 < y1:
-            alone = np.zeros((y1 - y0, x1 - x0), np.uint8)
-            draw(alone, 1, cv2.LINE_8, (x0, y0))
-            total = int(np.count_nonzero(alone))
-            seen = int(np.count_nonzero(ids[y0:y1, x0:x1][alone > 0] == k))
-            fraction = seen / total if total else 0.0
-        smoky = alpha is not None and in_view and alpha[int(round(v)), int(round(u))] > SMOKE_OPAQUE
-        visible = in_view and fraction >= VISIBLE_FRACTION and not smoky
-        labels.append(TargetLabel(index, (u, v), depth, radius, in_view, visible, fraction))
+    labels = [target_label(i, drawn.get(i), ids, width, height, alpha) for i in range(len(targets))]
 
     if th is not None:
         th = cv2.GaussianBlur(th, (3, 3), 0.7)  # thermal optics are soft (chosen here)

@@ -5,14 +5,23 @@
 :class:`~agent.sensors.bearing.Bearing` s — but goes through the image:
 
 1. **capture** at ``t``: the frame the vehicle's camera sees, rendered from the *true* pose and the
-   world truth (:func:`perception.render.render_frame`; targets drawn as red discs or balls, with the
-   configured :class:`~perception.degradation.Degradation`), or the next frame of an external OpenCV
-   source (:class:`~agent.sensors.video_source.VideoSource`: a file, a device, a stream) that replaces
-   the synthetic camera;
-2. **video quality** D(t) of the frame (thesis 000 §2.4, :class:`~perception.quality.VideoQuality`);
-3. **detection**: colour blobs by default (Ross et al., :class:`~perception.blobs.ColorBlobDetector`) or
-   dark blobs (thesis 000 §2.2), optionally through the persistent-object filter; blobs touching the
-   image border are dropped (a cut blob's centroid is biased);
+   world truth (targets drawn as red discs or balls, with the configured
+   :class:`~perception.degradation.Degradation`), or the next frame of an external OpenCV source
+   (:class:`~agent.sensors.video_source.VideoSource`: a file, a device, a stream) that replaces the
+   synthetic camera. With ``render = "roi"`` (the default) the synthetic camera draws only what the
+   detector needs (:func:`perception.roi_render.render_roi`): the whole view at 320×240 plus, for the
+   colour detector, full-resolution windows around the targets — a few times cheaper than the whole
+   640×480 frame, which ``render = "full"`` draws (:func:`perception.render.render_frame`, the reference;
+   ``skymesh bench perception`` times both). A frame with a banding episode or a failed link is drawn
+   whole either way;
+2. **video quality** D(t) of the frame (thesis 000 §2.4, :class:`~perception.quality.VideoQuality`); of a
+   frame drawn in parts, D(t) is measured on its 320×240 preview, which is the image ``I`` D(t) is defined
+   on (the whole frame downsampled to 320×240; the preview is drawn at that size with the noise the
+   downsampling leaves);
+3. **detection**: colour blobs by default (Ross et al., :class:`~perception.blobs.ColorBlobDetector`; in
+   the windows of a frame drawn in parts) or dark blobs (thesis 000 §2.2; on the preview, its working
+   image), optionally through the persistent-object filter; detections are in frame pixels either way;
+   blobs touching the image border are dropped (a cut blob's centroid is biased);
 4. **pose**: the telemetry the sensor gets is a simulated GPS/attitude stream — the true pose
    delayed by ``gps_latency`` (plus optional attitude noise) — kept in a
    :class:`~perception.pose_buffer.PoseBuffer`. With ``latency_compensation`` the buffer stores each
@@ -58,6 +67,8 @@ from perception.pose import CameraMount, CameraPose, Gimbal
 from perception.pose_buffer import PoseBuffer, PoseSample, PoseTooNew, PoseTooOld
 from perception.quality import VideoQuality
 from perception.render import default_ground, render_frame
+from perception.roi_frame import RoiFrame, whole_view
+from perception.roi_render import render_roi
 from perception.rotations import rot_x, rot_y, rot_z
 from perception.scene import Target
 from perception.terrain import FlatTerrain
@@ -147,7 +158,7 @@ class CameraSensor(BearingSource):
         self._telemetry(t, state)
         frame, labels = self._capture(t, state, truth)
         self.stats.frames += 1
-        self.last_quality = self.quality.update(frame)
+        self.last_quality = self.quality.update(whole_view(frame))
         if frame is not None:
             result = self.detector.detect(frame)
             if result.error is not None:
@@ -205,7 +216,8 @@ class CameraSensor(BearingSource):
         self.poses.add(t, true.position, roll, pitch, yaw, true.pan, true.tilt)
 
     def _capture(self, t: float, state, truth: list[dict]):
-        """The frame at ``t`` and its target labels ``[(truth id, label)]`` (empty for an external source)."""
+        """The frame at ``t`` (an image, or a :class:`~perception.roi_frame.RoiFrame`) and its target labels
+        ``[(truth id, label)]`` (empty for an external source)."""
         if self.source is not None:
             frame = self.source.read()
             if frame is None:
@@ -227,10 +239,15 @@ class CameraSensor(BearingSource):
             ids.append(target["id"])
         level = getattr(self.terrain, "level", None)
         terrain = None if level is not None else self.terrain
-        rendered = render_frame((pose, self.intrinsics), self.intrinsics.width, self.intrinsics.height, targets,
-                                ground=self.ground, ground_height=level or 0.0, terrain=terrain,
-                                degradation=self.degradation, seed=self.rng, thermal=False)
-        return rendered.rgb, list(zip(ids, rendered.targets, strict=True))
+        scene = dict(ground=self.ground, ground_height=level or 0.0, terrain=terrain, degradation=self.degradation,
+                     seed=self.rng)
+        size = (self.intrinsics.width, self.intrinsics.height)
+        if c.render == "roi":
+            rendered = render_roi((pose, self.intrinsics), *size, targets, **scene)
+        else:
+            rendered = render_frame((pose, self.intrinsics), *size, targets, thermal=False, **scene)
+        frame = rendered if isinstance(rendered, RoiFrame) else rendered.rgb
+        return frame, list(zip(ids, rendered.targets, strict=True))
 
     def _kept(self, detections) -> np.ndarray:
         """Centres of the detections whose box stays clear of the image border."""

@@ -14,6 +14,7 @@ from perception.degradation import FAILURE_MODES, Degradation
 from perception.pose import Gimbal
 
 DETECTORS = ("color", "dark")
+RENDERS = ("roi", "full")
 TARGET_SHAPES = ("disc", "sphere")
 
 
@@ -28,6 +29,7 @@ class CameraSensorConfig:
     pan: float = 0.0  # gimbal pan [rad] (config: pan_deg)
     tilt: float = -math.pi / 2  # gimbal tilt [rad]; -90 deg looks straight down (config: tilt_deg)
     detector: str = "color"  # "color" (Ross et al. HSV blobs) or "dark" (thesis 000 dark blobs)
+    render: str = "roi"  # "roi": only what the detector needs (perception.roi_render); "full": the whole frame
     persistence: bool = False  # run detections through the persistent-object filter (thesis 000 §2.3)
     edge_margin: float = 2.0  # px: blobs whose box comes this close to the border are dropped
     noise: float = 2.0  # sensor noise [gray levels] (Degradation.noise_sigma)
@@ -48,6 +50,8 @@ class CameraSensorConfig:
     def __post_init__(self):
         if self.detector not in DETECTORS:
             raise ValueError(f"sensor.detector must be one of {DETECTORS}, got {self.detector!r}")
+        if self.render not in RENDERS:
+            raise ValueError(f"sensor.render must be one of {RENDERS}, got {self.render!r}")
         if self.target_shape not in TARGET_SHAPES:
             raise ValueError(f"sensor.target_shape must be one of {TARGET_SHAPES}, got {self.target_shape!r}")
         if self.failed is not None and self.failed not in FAILURE_MODES:
@@ -87,7 +91,7 @@ class CameraSensorConfig:
         """From a scenario's ``[sensor]`` table (angles in degrees, named ``*_deg``)."""
         degrees = {"hfov_deg": "hfov", "pan_deg": "pan", "tilt_deg": "tilt", "attitude_sigma_deg": "attitude_sigma",
                    "attitude_noise_deg": "attitude_noise"}
-        plain = {"width", "height", "detector", "persistence", "edge_margin", "noise", "banding_prob",
+        plain = {"width", "height", "detector", "render", "persistence", "edge_margin", "noise", "banding_prob",
                  "speckle_rate", "failed", "gps_latency", "latency_compensation", "pixel_sigma", "target_radius",
                  "target_shape", "target_rgb", "ground", "pose_buffer"}
         unknown = set(d) - set(degrees) - plain - {"kind"}
@@ -109,7 +113,7 @@ class CameraSensorConfig:
                 kwargs[key] = None if value in (None, "none", "") else value
             elif key == "target_rgb":
                 kwargs[key] = tuple(int(c) for c in value)
-            elif key in ("detector", "target_shape", "ground"):
+            elif key in ("detector", "render", "target_shape", "ground"):
                 kwargs[key] = value
             elif key in plain:
                 kwargs[key] = _number(value, key)

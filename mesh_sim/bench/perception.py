@@ -18,6 +18,14 @@ raw and processed sizes), every operation timed in the same run, interleaved (se
   geolocation of one detection with its covariance on that DEM (:func:`perception.geolocation.geolocate`,
   what an agent does to start a track or in ``measurement = "position"`` mode).
 
+* **camera, whole frame vs ROI**: the camera sensor's pipeline (:class:`agent.sensors.camera.CameraSensor`, the
+  default scenario's view: nadir from 80 m, 90° HFOV, three car-sized discs, two in view) drawn whole
+  (:func:`perception.render.render_frame`, ``[sensor] render = "full"``) and as a preview plus windows
+  (:func:`perception.roi_render.render_roi`, ``render = "roi"``): the render, the colour blobs (red discs over the
+  terrain), the dark blobs (dark discs over the tiled floor), the video quality and the whole sensor step (render,
+  D(t), colour blobs, bearings); each ROI row is also given as a ratio to its whole-frame row (a camera of at
+  most 320×240 is drawn whole: there the two time the same work).
+
 Baseline, measured in the same run on the same RGB frame: a bare OpenCV operation of comparable size,
 ``cv2.cvtColor(RGB -> gray)`` + ``cv2.threshold``; every operation is also given as a ratio to it.
 
@@ -78,7 +86,17 @@ OPS = [
     Op("geo_flat", "pixel -> ground, flat", "geolocate", False),
     Op("geo_dem", "pixel -> ground, grid DEM", "geolocate", False),
     Op("geo_ut", "UT geolocation of a detection (DEM)", "geolocate", True),
+    *(
+        Op(f"camera_{stage}_{render}", f"{label}, {'ROI' if render == 'roi' else 'whole frame'}", "camera", False)
+        for stage, label in (("render", "camera render"), ("colour", "colour blobs"), ("dark", "dark blobs"),
+                             ("quality", "video quality D(t)"), ("step", "camera sensor step"))
+        for render in ("full", "roi")
+    ),
 ]
+#: The camera stages timed whole and as ROI (``camera_<stage>_full`` and ``camera_<stage>_roi``).
+CAMERA_STAGES = ("render", "colour", "dark", "quality", "step")
+CAMERA_ALTITUDE_M = 80.0  # the default scenario's flight altitude
+CAMERA_TARGETS_NE = ((12.0, -7.0), (-30.0, 20.0), (200.0, 0.0))  # two in view of the 80 m camera, one far away
 OP_BY_KEY = {op.key: op for op in OPS}
 RENDER_KEYS = ("render_both",)
 
@@ -154,8 +172,63 @@ def jobs(width: int, height: int) -> dict[str, Callable[[], object]]:
         "geo_dem": lambda: pixel_to_ground(pose, intrinsics, dem, pixel),
         "geo_ut": lambda: geolocate(pose.centre, azel, R_azel, dem),
     }
+    table.update(camera_jobs(width, height))
     assert list(table) == [op.key for op in OPS]
     return table
+
+
+def camera_jobs(width: int, height: int) -> dict[str, Callable[[], object]]:
+    """The camera stages, whole frame and ROI, at one image size (see the module docstring)."""
+    import itertools
+
+    from agent.sensors.camera import CameraSensor
+    from agent.sensors.camera_config import CameraSensorConfig
+    from agent.vehicles.base import VehicleState
+    from perception.blobs import ColorBlobDetector, DarkBlobDetector
+    from perception.camera import Intrinsics
+    from perception.pose import CameraPose, Gimbal
+    from perception.quality import VideoQuality
+    from perception.render import Target, render_frame
+    from perception.roi_frame import RoiFrame, whole_view
+    from perception.roi_render import render_roi
+
+    position = np.array([0.0, 0.0, -CAMERA_ALTITUDE_M])
+    pose = CameraPose.from_vehicle(position, 0.02, -0.01, 0.3, Gimbal(0.0, -math.pi / 2))
+    camera = (pose, Intrinsics.from_fov(width, height, 90.0))
+
+    def scene(rgb):
+        return [Target((n, e, 0.0), 1.5, rgb, shape="disc") for n, e in CAMERA_TARGETS_NE]
+
+    red, dark = scene((200, 20, 20)), scene((28, 28, 32))
+
+    def draw(render: str, targets, ground: str = "terrain"):
+        """The frame the camera hands its detector: the whole RGB image, or a RoiFrame."""
+        if render == "roi":
+            frame = render_roi(camera, width, height, targets, ground=ground, seed=1)
+            if isinstance(frame, RoiFrame):
+                return frame
+        return render_frame(camera, width, height, targets, ground=ground, seed=1, thermal=False).rgb
+
+    truth = [{"id": f"t{k}", "position": np.array([n, e, 0.0])} for k, (n, e) in enumerate(CAMERA_TARGETS_NE)]
+    table = {}
+    for render in ("full", "roi"):
+        colour_frame, dark_frame = draw(render, red), draw(render, dark, "tiles")
+        whole = whole_view(colour_frame)  # what D(t) is measured on
+        colour, dark_blobs, quality = ColorBlobDetector(), DarkBlobDetector(), VideoQuality()
+        sensor = CameraSensor(CameraSensorConfig(width=width, height=height, render=render), seed=1)
+        steps = itertools.count()
+
+        def step(sensor=sensor, steps=steps):
+            t = 0.2 * next(steps)
+            return sensor.detect(t, VehicleState(t, position, np.zeros(3), 0.3, 0.02, -0.01), truth)
+
+        table[f"camera_render_{render}"] = lambda render=render: draw(render, red)
+        table[f"camera_colour_{render}"] = lambda d=colour, f=colour_frame: d.detect(f)
+        table[f"camera_dark_{render}"] = lambda d=dark_blobs, f=dark_frame: d.detect(f)
+        table[f"camera_quality_{render}"] = lambda q=quality, f=whole: q.update(f)
+        table[f"camera_step_{render}"] = step
+    return {f"camera_{stage}_{render}": table[f"camera_{stage}_{render}"] for stage in CAMERA_STAGES
+            for render in ("full", "roi")}
 
 
 def _check_sizes(sizes) -> tuple[tuple[int, int], ...]:
@@ -211,6 +284,7 @@ def run(
     finally:
         cv2.setNumThreads(saved)
     steps = _steps(rows, sizes)
+    roi = _roi(rows, sizes)
     goals = {
         "one_agent_per_core": {
             "description": f"at least one simulated agent (render + perceive) per core at {AGENT_RATE_HZ:g} Hz",
@@ -227,8 +301,23 @@ def run(
         "environment": common.environment(("numpy", "scipy", "opencv-python-headless")),
         "rows": rows,
         "steps": steps,
+        "roi": roi,
         "goals": goals,
     }
+
+
+def _roi(rows: list[dict], sizes) -> list[dict]:
+    """Each camera stage drawn as ROI against the whole frame, per size, from the one-thread timings."""
+    out = []
+    for width, height in sizes:
+        size = f"{width}x{height}"
+        ms = {r["op"]: r["ms"] for r in rows if r["size"] == size and r["threads"] == 1}
+        for stage in CAMERA_STAGES:
+            full, roi = ms[f"camera_{stage}_full"], ms[f"camera_{stage}_roi"]
+            label = OP_BY_KEY[f"camera_{stage}_full"].label.rsplit(",", 1)[0]
+            out.append({"size": size, "stage": stage, "label": label, "full_ms": full, "roi_ms": roi,
+                        "ratio": roi / full})
+    return out
 
 
 def _steps(rows: list[dict], sizes) -> list[dict]:
@@ -304,6 +393,25 @@ def report(result: dict, console=None) -> None:
         "Step = " + " + ".join(OP_BY_KEY[k].label for k in s["step_ops"]) + ".\nAgents per core = floor(budget / "
         "step); perception-only drops the rendering (a real camera). The agent's fusion and messaging are not "
         "included (see skymesh bench fusion-ops / scale).",
+    )
+    roi = {(r["size"], r["stage"]): r for r in result["roi"]}
+    roi_rows = []
+    for stage in CAMERA_STAGES:
+        cells = [roi[(sizes[0], stage)]["label"]]
+        for size in sizes:
+            r = roi[(size, stage)]
+            cells += [common.fmt_ms(r["full_ms"]), common.fmt_ms(r["roi_ms"]), common.fmt_ratio(r["ratio"])]
+        roi_rows.append(cells)
+    columns = [("camera stage", "left")]
+    for size in sizes:
+        columns += [f"{size} whole ms", f"{size} ROI ms", "ROI ÷ whole"]
+    common.print_table(
+        console, "Camera: whole frame vs ROI (render = \"full\" vs \"roi\"; 1 OpenCV thread)", columns, roi_rows,
+        f"The default scenario's view: nadir from {CAMERA_ALTITUDE_M:g} m, 90° HFOV, {len(CAMERA_TARGETS_NE)} discs "
+        "of 1.5 m (two in view). ROI: a preview of the whole view at 320×240 plus full-resolution windows around "
+        "the targets (perception.roi_render); a camera no larger than 320×240 is drawn whole.\nColour blobs: red "
+        "discs over the terrain; dark blobs: dark discs over the tiled floor. Step: CameraSensor.detect (render, "
+        "D(t), colour blobs, bearings).",
     )
     goal = result["goals"]["one_agent_per_core"]
     console.print(f"{common.verdict(goal['pass'])}  {goal['description']}", highlight=False)

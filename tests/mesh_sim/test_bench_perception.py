@@ -42,9 +42,15 @@ def test_perception_smallest_run():
     assert step["agents_per_core"] == int(step["budget_ms"] // step["step_ms"]) > 0
     assert step["perception_agents_per_core"] >= step["agents_per_core"]
     assert result["goals"]["one_agent_per_core"]["pass"] is True
+    ms = {r["op"]: r["ms"] for r in rows}
+    assert [(r["size"], r["stage"]) for r in result["roi"]] == [("160x120", s) for s in perception.CAMERA_STAGES]
+    for r in result["roi"]:  # each ROI stage against its whole-frame stage, timed in the same run
+        assert r["full_ms"] == ms[f"camera_{r['stage']}_full"] and r["roi_ms"] == ms[f"camera_{r['stage']}_roi"]
+        assert r["ratio"] == pytest.approx(r["roi_ms"] / r["full_ms"])
     json.dumps(common._finite(result))
     text = _printed(perception, result)
     assert "Agent step budget" in text and "agents / core" in text and "160x120" in text
+    assert "whole frame vs ROI" in text and "ROI ÷ whole" in text and "camera sensor step" in text
 
 
 def test_perception_rejects_bad_sizes():
