@@ -23,7 +23,7 @@ from agent.net.bus import InMemoryBus
 from agent.net.keys import Keys
 from agent.sensors.bearing import GeometricBearingSensor
 from mesh_sim.launcher import Launcher, new_run_dir
-from mesh_sim.lockstep import agent_subscriptions, run_lockstep
+from mesh_sim.lockstep import run_lockstep
 from mesh_sim.scenario import load
 from mesh_sim.world import World
 from tests.processes import assert_all_gone
@@ -58,7 +58,7 @@ class SteppedFleet:
         keys = Keys(f"{scenario.name}-{uuid.uuid4().hex[:8]}")
         bus = InMemoryBus()
         self.agents = [
-            Agent(f"uav{i}", i, sc, bus.endpoint(f"uav{i}", agent_subscriptions(keys)), keys, seed=sc.seed * 1000 + i)
+            Agent(f"uav{i}", i, sc, bus.endpoint(f"uav{i}", keys.agent_subscriptions()), keys, seed=sc.seed * 1000 + i)
             for i in range(sc.agents)
         ]
         self.world = World(scenario, bus.endpoint("world", World.subscriptions(keys)), keys)
