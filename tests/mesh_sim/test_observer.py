@@ -53,8 +53,9 @@ def _telemetry(agent: str, seq: int, stamp: float, neighbours: list[str], n_trac
 
 
 def _truth(stamp: float) -> dict:
-    return {"targets": [{"id": i, "position": np.array([5.0 * i + stamp, 3.0 * i, 0.0]),
-                         "velocity": np.array([1.0, 0.0, 0.0])} for i in range(3)]}
+    """The world's truth as docs/wire.md types it: string ids, positions and velocities as three numbers."""
+    return {"targets": [{"id": str(i), "position": [5.0 * i + stamp, 3.0 * i, 0.0],
+                         "velocity": [1.0, 0.0, 0.0]} for i in range(3)]}
 
 
 def _envelope(kind: str, origin: str, seq: int, stamp: float, payload: dict) -> bytes:
@@ -160,7 +161,7 @@ def test_observer_logs_expected_entities_and_survives_bad_input(tmp_path):
     assert all(accepted) and obs.accepted == 25
 
     bad = [
-        Incoming(keys.telemetry("uav0"), b"\x93not an envelope", 0.0),  # malformed msgpack
+        Incoming(keys.telemetry("uav0"), b"\x93not an envelope", 0.0),  # an array, not an envelope map
         Incoming(keys.telemetry("uav1"), _envelope("telemetry", "uav0", 50, 2.0, _telemetry("uav0", 50, 2.0, [])),
                  0.0),  # origin differs from the key's agent
         Incoming(keys.telemetry("uav0"), _envelope("telemetry", "uav0", 51, 2.0, {"velocity": np.zeros(3)}), 0.0),
@@ -175,8 +176,8 @@ def test_observer_logs_expected_entities_and_survives_bad_input(tmp_path):
         Incoming(keys.sim("truth"), _envelope("truth", "world", 60, 2.0, {"targets": [{"id": 0}]}), 0.0),
     ]
     assert not any(obs.handle(item) for item in bad)
-    assert obs.rejected == {"malformed": 1, "origin_mismatch": 1, "bad_field": 2, "non_finite": 1, "indefinite": 1,
-                            "duplicate": 1, "bad_key": 1}
+    assert obs.rejected == {"bad_type": 1, "origin_mismatch": 1, "bad_field": 1, "non_finite": 1, "indefinite": 1,
+                            "duplicate": 1, "bad_key": 1, "bad_truth": 1}  # a target without a position: the schema
     assert obs.accepted == 25
     obs.close()
 
@@ -269,7 +270,7 @@ def test_observer_process_over_zenoh_stops_on_sigterm(router, tmp_path):
             proc.wait(timeout=10)
         log_file.close()
     text = (tmp_path / "observer.log").read_text()
-    assert "rejected a message from uav1 (malformed)" in text, text
+    assert "rejected a message from uav1 (bad_type)" in text, text  # b"garbage": an int, not an envelope
     rows, _ = _read_rrd(rrd)
     for entity in ("/world/truth", "/world/uav/uav0", "/world/uav/uav1/path", "/world/agents/uav0/tracks",
                    "/world/agents/uav1/rays", "/world/links", "/metrics/uav1/tracks"):
