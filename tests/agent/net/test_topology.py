@@ -148,16 +148,15 @@ def test_newest_report_wins():
 
 
 def test_own_report_goes_out_when_the_neighbours_change_or_a_beacon_is_due():
-    topo = Topology(ME)
+    topo, half = Topology(ME), BEACON_PERIOD / 2
     assert topo.outgoing(0.0) == {"reports": {ME: [0.0, []]}}  # the first beacon: peers hear us
-    assert topo.outgoing(0.2) is None
-    topo.heard("a1", 0.3)
-    assert topo.outgoing(0.4) == {"reports": {ME: [0.4, ["a1"]]}}  # a new neighbour: at once
-    topo.heard("a1", 1.2)
-    assert topo.outgoing(1.2) is None  # nothing changed, beacon not due
-    assert topo.outgoing(0.4 + BEACON_PERIOD) == {"reports": {ME: [0.4 + BEACON_PERIOD, ["a1"]]}}
-    assert topo.outgoing(2.0) is None
-    assert topo.outgoing(4.5) == {"reports": {ME: [4.5, []]}}  # a1 timed out (3 s): a change
+    assert topo.outgoing(half) is None
+    topo.heard("a1", half)
+    assert topo.outgoing(half) == {"reports": {ME: [half, ["a1"]]}}  # a new neighbour: at once
+    assert topo.outgoing(half + 0.9 * BEACON_PERIOD) is None  # nothing changed, beacon not due
+    assert topo.outgoing(half + BEACON_PERIOD) == {"reports": {ME: [half + BEACON_PERIOD, ["a1"]]}}
+    later = half + NEIGHBOUR_TIMEOUT + 0.01  # a1 timed out: a change, sent at once
+    assert topo.outgoing(later) == {"reports": {ME: [later, []]}}
 
 
 def test_a_full_mesh_relays_nothing_and_a_line_relays_each_new_report_once():
