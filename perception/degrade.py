@@ -245,13 +245,3 @@ def degrade(
     return DegradationInfo(banding=banding, speckles=speckles, failed=deg.failed)
 
 
-#: The video conditions detectors are evaluated under: clean, the two transient defects and the three
-#: failure modes (thesis 000 §2.4); shared by the detection benchmark and the detector tests.
-CONDITIONS: dict[str, Degradation] = {
-    "clean": Degradation(),
-    "banding": Degradation(banding_prob=0.5),
-    "speckles": Degradation(speckle_rate=2.0),
-    "snow": Degradation(failed="snow"),
-    "black": Degradation(failed="black"),
-    "bands": Degradation(failed="banding"),
-}
