@@ -243,5 +243,3 @@ def degrade(
             _window(_unit_noise(width, height), width, height, rng), float(deg.thermal_noise_K), thermal, dst=thermal
         )
     return DegradationInfo(banding=banding, speckles=speckles, failed=deg.failed)
-
-
