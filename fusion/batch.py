@@ -28,10 +28,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from fusion.gaussian import Gaussian, UninformativeBeliefError
-from fusion.measurement import wrap_angle
+from fusion.measurement import MIN_RHO2, bearing3d_linearization, wrap_angle
 
-#: Smallest squared horizontal distance at which a bearing is defined (same value as fusion.measurement).
-_MIN_RHO2 = 1e-12
 _TINY = np.finfo(float).tiny  # the smallest normal float64
 
 
@@ -173,18 +171,11 @@ class GaussianBatch:
         if n < 3:
             raise ValueError(f"a 3-D bearing needs a state with at least 3 position components, got dimension {n}")
         mu = self._linearization_points(linearization_points)
-        d = mu[:, :3] - self._sensors(sensors, 3)
-        rho2 = d[:, 0] ** 2 + d[:, 1] ** 2
+        z_hat, J, rho2 = bearing3d_linearization(mu[:, :3], self._sensors(sensors, 3))
         _check_rho2(rho2, "azimuth is undefined: the target is straight above or below the sensor")
-        rho = np.sqrt(rho2)
-        r2 = rho2 + d[:, 2] ** 2
         H = np.zeros((N, 2, n))
-        H[:, 0, 0] = -d[:, 1] / rho2
-        H[:, 0, 1] = d[:, 0] / rho2
-        H[:, 1, 0] = d[:, 2] * d[:, 0] / (rho * r2)
-        H[:, 1, 1] = d[:, 2] * d[:, 1] / (rho * r2)
-        H[:, 1, 2] = -rho / r2
-        innovation = self._measurements(z, 2) - np.stack([np.arctan2(d[:, 1], d[:, 0]), np.arctan2(-d[:, 2], rho)], -1)
+        H[:, :, :3] = J
+        innovation = self._measurements(z, 2) - z_hat
         innovation[:, 0] = wrap_angle(innovation[:, 0])
         return self.update(H, R_inv, innovation + (H @ mu[..., None])[..., 0])
 
@@ -281,8 +272,8 @@ def _check_finite(arr: np.ndarray, name: str) -> np.ndarray:
 
 
 def _check_rho2(rho2: np.ndarray, message: str) -> None:
-    if np.any(rho2 < _MIN_RHO2):
-        raise ValueError(f"{message} (track(s) {np.flatnonzero(rho2 < _MIN_RHO2)[:10].tolist()})")
+    if np.any(rho2 < MIN_RHO2):
+        raise ValueError(f"{message} (track(s) {np.flatnonzero(rho2 < MIN_RHO2)[:10].tolist()})")
 
 
 def _singular_tracks(Y: np.ndarray) -> list[int]:

@@ -20,10 +20,9 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.linalg
 from scipy.linalg.lapack import dpotrf, dpotrs
 
-from fusion import validation
+from fusion import lapack, validation
 
 _sum = np.add.reduce  # without ndarray.sum's Python wrapper: it runs on every predict and update
 
@@ -50,7 +49,7 @@ class Gaussian:
         """From a mean and a positive-definite covariance: ``Y = P^-1``, ``y = P^-1 mu`` (3.7)-(3.8)."""
         mean = validation.as_vector(mean, "mean")
         cov = validation.as_pd(cov, "covariance", mean.shape[0])
-        Y = _spd_inverse(cov)
+        Y = lapack.spd_inverse(cov)
         return cls(Y @ mean, Y)
 
     @classmethod
@@ -241,8 +240,3 @@ class Gaussian:
 
     def __repr__(self) -> str:
         return f"Gaussian(dim={self.dim}, trace(Y)={np.trace(self.Y):.4g})"
-
-
-def _spd_inverse(matrix: np.ndarray) -> np.ndarray:
-    inv = scipy.linalg.cho_solve(scipy.linalg.cho_factor(matrix, lower=True), np.eye(matrix.shape[0]))
-    return 0.5 * (inv + inv.T)

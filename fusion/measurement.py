@@ -12,7 +12,10 @@ import math
 
 import numpy as np
 
-from fusion import validation
+from fusion import lapack, validation
+
+#: Smallest squared horizontal distance [m^2] from the sensor at which an azimuth is defined.
+MIN_RHO2 = 1e-12
 
 
 def wrap_angle(angle):
@@ -29,7 +32,7 @@ class _Model:
         self.state_dim = state_dim
         self.spatial_dims = spatial_dims
         self.R = validation.as_pd(R, "measurement noise R", self.dim)
-        self.R_inv = np.linalg.inv(self.R)
+        self.R_inv = lapack.spd_inverse(self.R)
 
     dim: int
 
@@ -79,7 +82,7 @@ class Bearing2D(_Model):
         px, py = (x.tolist() if isinstance(x, np.ndarray) else list(x))[:2]
         dx, dy = px - self._sensor[0], py - self._sensor[1]
         rho2 = dx * dx + dy * dy
-        if rho2 < 1e-12:
+        if rho2 < MIN_RHO2:
             raise ValueError("the bearing is undefined: the target is at the sensor position")
         return dx, dy, rho2
 
@@ -118,7 +121,7 @@ class Bearing3D(_Model):
         sx, sy, sz = self._sensor
         dx, dy, dz = px - sx, py - sy, pz - sz
         rho2 = dx * dx + dy * dy
-        if rho2 < 1e-12:
+        if rho2 < MIN_RHO2:
             raise ValueError("azimuth is undefined: the target is straight above or below the sensor")
         return dx, dy, dz, rho2
 
@@ -153,3 +156,39 @@ def azel_to_los(azel) -> np.ndarray:
     """Unit line-of-sight vector in NED for an azimuth/elevation pair."""
     az, el = validation.as_vector(azel, "azimuth/elevation", 2)
     return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
+
+
+def bearing3d_linearization(points, sensors) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:meth:`Bearing3D.linearize` for many position/sensor pairs at once (numpy broadcasting over the leading
+    axes of ``points`` and ``sensors``, both ``(..., 3)``): ``h`` = (azimuth, elevation) ``(..., 2)``, its
+    Jacobian with respect to the position ``(..., 2, 3)``, and ``rho^2`` ``(...)``, the squared horizontal
+    distance — the bearing is defined only where ``rho^2 >= MIN_RHO2`` (elsewhere the values are not finite)."""
+    d = np.asarray(points, float) - np.asarray(sensors, float)
+    dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
+    rho2 = dx * dx + dy * dy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = np.sqrt(rho2)
+        r2 = rho2 + dz * dz
+        J = np.zeros(d.shape[:-1] + (2, 3))
+        J[..., 0, 0], J[..., 0, 1] = -dy / rho2, dx / rho2
+        J[..., 1, 0], J[..., 1, 1], J[..., 1, 2] = dz * dx / (rho * r2), dz * dy / (rho * r2), -rho / r2
+    return np.stack([np.arctan2(dy, dx), np.arctan2(-dz, rho)], -1), J, rho2
+
+
+def bearing_gate_distances(sensors, azel, R, means, covs) -> np.ndarray:
+    """Merino (3.64) for every pair of ``m`` bearings and ``k`` position beliefs at once: ``d^2 = nu^T S^-1 nu``
+    with ``S = H P H^T + R`` and ``nu = z - h(mu)`` (azimuth wrapped), ``h`` and ``H`` those of
+    :class:`Bearing3D` at the belief's mean (:func:`bearing3d_linearization`).
+
+    ``sensors`` ``(m, 3)``, ``azel`` ``(m, 2)``, ``R`` ``(m, 2, 2)``; ``means`` ``(k, 3)``, ``covs`` ``(k, 3, 3)``
+    (positions only: a bearing sees nothing else). Returns an ``(m, k)`` array, NaN where the bearing is
+    undefined (the belief straight above or below the sensor) or ``S`` is not positive definite."""
+    z_hat, J, rho2 = bearing3d_linearization(means[None, :, :], sensors[:, None, :])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        S = J @ covs[None] @ np.swapaxes(J, -1, -2) + R[:, None]
+        nu0 = wrap_angle(azel[:, None, 0] - z_hat[..., 0])
+        nu1 = azel[:, None, 1] - z_hat[..., 1]
+        a, b, c = S[..., 0, 0], S[..., 0, 1], S[..., 1, 1]
+        det = a * c - b * b
+        d2 = (c * nu0 * nu0 - 2.0 * b * nu0 * nu1 + a * nu1 * nu1) / det  # S^-1 of a 2x2 in closed form
+    return np.where((rho2 >= MIN_RHO2) & (a > 0.0) & (det > 0.0), d2, np.nan)

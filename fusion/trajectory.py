@@ -24,11 +24,13 @@ data are applied at the time they were taken, not as if current.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf, dtrtrs
 
-from fusion import validation
+from fusion import lapack, validation
 from fusion.covariance_intersection import fast_weights, optimal_weights
 from fusion.gaussian import Gaussian, UninformativeBeliefError
 from fusion.inverse_covariance_intersection import ici
@@ -140,6 +142,27 @@ class Trajectory:
         Y[block, block] += HtRi @ H
         return Trajectory(y, Y, self.epoch, self.model)
 
+    def add_information(self, offsets, infos: np.ndarray, vectors: np.ndarray) -> Trajectory:
+        """Several measurements at once, each on the state ``offsets[j]`` steps before the newest: ``Y_kk +=
+        I_j``, ``y_k += i_j`` with ``I_j = H_j^T R_j^-1 H_j`` and ``i_j = H_j^T R_j^-1 z_j`` (Merino (3.29)-(3.30);
+        for a linearised one ``z_j`` is ``z - h(mu) + H mu``, (3.52)). ``infos`` ``(m, p, p)`` and ``vectors``
+        ``(m, p)`` cover the first ``p`` components of a state (a bearing sees only the position). One copy of
+        the window for all of them; ``ValueError`` for an offset outside the window or a non-finite term."""
+        n, L = self.model.state_dim, self.model.window
+        offsets = np.asarray(offsets, int)
+        m, p = vectors.shape
+        if infos.shape != (m, p, p) or offsets.shape != (m,) or p > n:
+            raise ValueError(f"{m} measurements need (m, p, p) information terms and m offsets, p <= {n}")
+        if np.any((offsets < 0) | (offsets >= L)):
+            raise ValueError(f"a state offset is outside the window of {L} states")
+        if not (np.isfinite(infos).all() and np.isfinite(vectors).all()):
+            raise ValueError("measurement information terms contain non-finite values")
+        rows = ((L - 1 - offsets) * n)[:, None] + np.arange(p)  # (m, p): the rows of each state's first p entries
+        y, Y = self.y.copy(), self.Y.copy()
+        np.add.at(Y, (rows[:, :, None], rows[:, None, :]), infos)
+        np.add.at(y, rows, vectors)
+        return Trajectory(y, Y, self.epoch, self.model)
+
     def eif_update(self, model, z, offset: int = 0, linearization_point=None) -> Trajectory:
         """Extended information update of one state of the window (Merino (3.52))."""
         z = validation.as_vector(np.atleast_1d(np.asarray(z, dtype=float)), "measurement z", model.dim)
@@ -161,7 +184,26 @@ class Trajectory:
         return self.state(0)
 
     def _marginal(self, k: int) -> Gaussian:
-        """The marginal belief on state ``k`` of the window (0 the oldest), by eliminating the other states.
+        """The marginal belief on state ``k`` of the window (0 the oldest), by eliminating the other states
+        (Merino (3.31)-(3.32): ``Y_k <- Y_kk - Y_k,r Y_rr^-1 Y_r,k``, ``y_k <- y_k - Y_k,r Y_rr^-1 y_r``).
+
+        With the states ordered so that ``k`` comes last, ``Y = C C^T`` (Cholesky, ``C`` lower triangular)
+        has ``C_kk C_kk^T`` equal to that Schur complement, and ``C_kk w_k``, with ``C w = y``, equal to the
+        eliminated information vector: one LAPACK factorisation of the window (``potrf``) and one triangular
+        solve (``trtrs``). A window whose information is singular somewhere (a track not yet observed in
+        every direction) has no Cholesky factor; it is eliminated state by state instead (:meth:`_chain_marginal`)."""
+        n, L = self.model.state_dim, self.model.window
+        order = _last_state_order(n, L, k)
+        Y, y = (self.Y, self.y) if order is None else (self.Y.take(order, 0).take(order, 1), self.y.take(order))
+        factor, info = dpotrf(Y, lower=1, clean=1)
+        if info != 0:
+            return self._chain_marginal(k)
+        w, _ = dtrtrs(factor, y, lower=1)
+        C_k = factor[-n:, -n:]
+        return Gaussian(C_k @ w[-n:], C_k @ C_k.T)
+
+    def _chain_marginal(self, k: int) -> Gaussian:
+        """:meth:`_marginal` by eliminating one state at a time, which works on a singular window too.
 
         The information matrix is block-tridiagonal (the process factors couple consecutive states
         only, updates touch one block, and marginalising the oldest state keeps the structure), so the
@@ -201,7 +243,7 @@ class Trajectory:
     def _solve(Y_i: np.ndarray, coupling_t: np.ndarray, y_i: np.ndarray, i: int) -> np.ndarray:
         """``Y_i^-1 [Y_i,j | y_i]``; ``UninformativeBeliefError`` when state ``i`` carries singular information."""
         try:
-            return np.linalg.solve(Y_i, np.concatenate([coupling_t, y_i[:, None]], axis=1))
+            return lapack.solve(Y_i, np.concatenate([coupling_t, y_i[:, None]], axis=1))
         except np.linalg.LinAlgError:
             raise UninformativeBeliefError(f"state {i} of the window carries singular information") from None
 
@@ -262,6 +304,14 @@ class Trajectory:
         return f"Trajectory(epoch={self.epoch}, window={self.model.window}, state_dim={self.model.state_dim})"
 
 
+@functools.cache
+def _last_state_order(n: int, L: int, k: int) -> np.ndarray | None:
+    """Indices of a window of ``L`` states of dimension ``n`` with state ``k`` moved last (``None``: it is)."""
+    if k == L - 1:
+        return None
+    return np.r_[0 : k * n, (k + 1) * n : L * n, k * n : (k + 1) * n]
+
+
 def _slide(y: np.ndarray, Y: np.ndarray, n: int, factor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Augment with one state (process factor on the last two) and marginalise the oldest state."""
     m = Y.shape[0]
@@ -271,7 +321,7 @@ def _slide(y: np.ndarray, Y: np.ndarray, n: int, factor: np.ndarray) -> tuple[np
     y_big = np.concatenate([y, np.zeros(n)])
     Y00, Y0r = big[:n, :n], big[:n, n:]
     try:
-        sol = np.linalg.solve(Y00, np.concatenate([Y0r, y_big[:n, None]], axis=1))
+        sol = lapack.solve(Y00, np.concatenate([Y0r, y_big[:n, None]], axis=1))
     except np.linalg.LinAlgError:
         raise UninformativeBeliefError("cannot marginalise the oldest state: its information is singular") from None
     Yr = big[n:, n:] - Y0r.T @ sol[:, :-1]

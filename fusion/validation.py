@@ -59,10 +59,8 @@ def as_psd(value, name: str, size: int | None = None) -> np.ndarray:
 def as_pd(value, name: str, size: int | None = None) -> np.ndarray:
     """A symmetric positive-definite matrix, e.g. a covariance or a noise matrix."""
     arr = as_symmetric(value, name, size)
-    try:
-        np.linalg.cholesky(arr)
-    except np.linalg.LinAlgError:
-        raise ValueError(f"{name} is not positive definite") from None
+    if arr.size and dpotrf(arr, lower=1, clean=0)[1] != 0:  # Cholesky exists exactly for positive definite
+        raise ValueError(f"{name} is not positive definite")
     return arr
 
 

@@ -1,5 +1,6 @@
-"""``Trajectory.state(offset)``: the marginal of one state of the window by block-tridiagonal elimination from
-both ends (Merino (3.31)-(3.32)) equals the dense Schur complement (Merino App. A) of the whole window, and a
+"""``Trajectory.state(offset)``: the marginal of one state of the window — from a Cholesky factor of the window
+with that state last, or, when the window's information is singular, by block-tridiagonal elimination from
+both ends (Merino (3.31)-(3.32)) — equals the dense Schur complement (Merino App. A) of the whole window, and a
 belief computes each marginal once."""
 
 import numpy as np
@@ -30,6 +31,35 @@ def test_each_state_marginal_equals_the_dense_schur_complement(seed, offset):
     banded = belief.state(offset)
     np.testing.assert_allclose(banded.Y, dense.Y, rtol=1e-9, atol=1e-9 * np.abs(dense.Y).max())
     np.testing.assert_allclose(banded.mean, dense.mean, rtol=1e-9, atol=1e-9)
+
+
+def _unobserved_position(seed: int) -> Trajectory:
+    """Velocity measurements only: the window's information is singular (its position is unknown), so the
+    Cholesky path fails, while the velocity part of each state's marginal exists."""
+    rng = np.random.default_rng(seed)
+    belief = Trajectory.prior(MODEL, 5)
+    for _ in range(6):
+        H = np.hstack([np.zeros((3, 3)), np.eye(3)])
+        belief = belief.update(H, np.eye(3), rng.normal(size=3), int(rng.integers(0, 8)))
+    return belief
+
+
+@pytest.mark.parametrize("offset", [0, 3, MODEL.window - 1])
+def test_a_singular_window_is_eliminated_state_by_state_to_the_same_marginal(offset):
+    """The two ways agree where both exist, and on a singular window the marginal still comes out (its
+    position block empty of information), as the dense Schur complement of the other states says."""
+    k = MODEL.window - 1 - offset
+    observed = _observed(1)
+    cholesky, chain = observed._marginal(k), observed._chain_marginal(k)
+    np.testing.assert_allclose(cholesky.Y, chain.Y, rtol=1e-9, atol=1e-9 * np.abs(chain.Y).max())
+    np.testing.assert_allclose(cholesky.y, chain.y, rtol=1e-9, atol=1e-9 * np.abs(chain.y).max())
+    singular = _unobserved_position(2)
+    assert np.linalg.matrix_rank(singular.Y) < MODEL.dim
+    n = MODEL.state_dim
+    dense = Gaussian(singular.y, singular.Y).marginal(range(k * n, (k + 1) * n))
+    got = singular.state(offset)
+    np.testing.assert_allclose(got.Y, dense.Y, rtol=1e-9, atol=1e-9 * np.abs(dense.Y).max())
+    assert np.allclose(got.Y[:3, :3], 0.0, atol=1e-9 * np.abs(got.Y).max())  # the position: no information
 
 
 def test_a_marginal_is_computed_once_per_belief():
