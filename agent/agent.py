@@ -100,6 +100,8 @@ class Agent:
             exchange.absorb(t, observations)
         for item in self.transport.drain():
             self.receive(item, t)
+        for exchange in self.exchanges.values():
+            exchange.settle(t)
         self._publish_telemetry(t, state)
         self._publish_topology(t)
         neighbours = self.topology.neighbours(t)

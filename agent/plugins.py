@@ -121,6 +121,11 @@ class BeliefExchange(Protocol):
         :class:`agent.net.wire.DecodeError` on a bad message, and then changes nothing."""
         ...
 
+    def settle(self, t: float) -> None:
+        """Every message of this step has been received: apply what :meth:`receive` held back to apply
+        together (e.g. the flood policy's detections, :mod:`agent.beliefs.flood`)."""
+        ...
+
     def view(self) -> object:
         """A read-only view for planners (:mod:`tasking.base`)."""
         ...

@@ -34,6 +34,7 @@ from agent.beliefs.tracks import FUTURE_EPOCHS
 from agent.evaluation import TrackEvaluator
 from agent.net import wire
 from agent.sensors.bearing import Bearing
+from fusion import validation
 from fusion.network import hop_distances
 from mesh_sim.target_set import truth_snapshot
 from perception.terrain import terrain_from_config
@@ -53,44 +54,63 @@ class Oracle:
         self.imm_evaluator = TrackEvaluator()
         self.late = 0
         self.rejected = 0
+        self.held: list[tuple[float, list[Bearing]]] = []  # (stamp, bearings) of each message since the last evaluate
 
     def add(self, env: wire.Envelope, now: float) -> None:
-        """Apply one agent's bearings at the epoch they were taken (``now``: the world's simulation time;
-        bearings stamped far after it are a clock fault and rejected)."""
+        """Hold one agent's bearings for :meth:`evaluate`, which applies every held scan at the epoch it was
+        taken (``now``: the world's simulation time; bearings stamped far after it are a clock fault and
+        rejected)."""
         try:
-            bearings = [
-                Bearing(_stamp(b.get("t", env.stamp)), np.asarray(b["sensor"], float), np.asarray(b["azel"], float),
-                        np.asarray(b["R"], float), b["truth"])
-                for b in env.payload["bearings"]
-            ]
+            bearings = [_bearing(b, env.stamp) for b in env.payload["bearings"]]
         except (KeyError, TypeError, ValueError, AttributeError):
             self.rejected += 1
             return
-        epoch = self.tracker.model.epoch_of(env.stamp)
-        if epoch > self.tracker.model.epoch_of(now) + FUTURE_EPOCHS:
+        if self.tracker.model.epoch_of(env.stamp) > self.tracker.model.epoch_of(now) + FUTURE_EPOCHS:
             self.rejected += 1
             return
+        self.held.append((env.stamp, bearings))
+
+    def _apply_held(self) -> None:
+        """Every held scan in one update per tracker (:meth:`agent.beliefs.tracking.Tracker.update_scans`), after
+        advancing to the newest of them; a bearing older than the window (a camera bearing that waited for its
+        pose that long) is counted in ``late`` and left out."""
+        held, self.held = self.held, []
+        if not held:
+            return
+        model = self.tracker.model
+        epoch = max(model.epoch_of(stamp) for stamp, _ in held)
         if epoch > self.tracker.epoch:
             self.tracker.advance(epoch)
             if self.imm is not None:
                 self.imm.advance(epoch)
-        oldest = self.tracker.epoch - self.tracker.model.window + 1
-        if any(not oldest <= self.tracker.model.epoch_of(b.t) <= self.tracker.epoch for b in bearings):
-            self.late += 1  # a camera bearing that waited for its pose longer than the window
-            bearings = [b for b in bearings if oldest <= self.tracker.model.epoch_of(b.t) <= self.tracker.epoch]
-        try:
-            self.tracker.update(bearings, by_label=True)
-            if self.imm is not None:
-                self.imm.update(bearings, by_label=True)
-        except ValueError:  # older than the trajectory window
-            self.late += 1
+        oldest = self.tracker.epoch - model.window + 1
+        scans = []
+        for _, bearings in held:
+            usable = [b for b in bearings if oldest <= model.epoch_of(b.t) <= self.tracker.epoch]
+            self.late += len(usable) < len(bearings)
+            scans.append(usable)
+        self.tracker.update_scans(scans, by_label=True)
+        if self.imm is not None:
+            self.imm.update_scans(scans, by_label=True)
 
     def evaluate(self, targets) -> None:
+        """Apply the held bearings, then score both trackers against the truth."""
+        self._apply_held()
         t = self.tracker.epoch * self.tracker.model.step
         truth = truth_snapshot(targets, t)
         self.evaluator.record(t, truth, self.tracker.estimates())
         if self.imm is not None:
             self.imm_evaluator.record(t, truth, self.imm.estimates())
+
+
+def _bearing(entry: dict, stamp: float) -> Bearing:
+    """One bearing of a ``measurement`` message; ``ValueError`` unless its sensor position, azimuth/elevation
+    and positive-definite covariance are finite arrays of shapes 3, 2 and 2x2."""
+    sensor, azel = np.asarray(entry["sensor"], float), np.asarray(entry["azel"], float)
+    R = validation.as_pd(entry["R"], "bearing covariance R", 2)
+    if sensor.shape != (3,) or azel.shape != (2,) or not (np.isfinite(sensor).all() and np.isfinite(azel).all()):
+        raise ValueError("a bearing needs a finite sensor position (3) and azimuth/elevation (2)")
+    return Bearing(_stamp(entry.get("t", stamp)), sensor, azel, R, entry["truth"])
 
 
 def _stamp(value) -> float:

@@ -9,7 +9,10 @@ the same tracker on the fleet's detections — association (Merino (3.64)), init
 information updates (3.52) — as the centralized filter does, and no belief is ever exchanged, so nothing
 can be counted twice on any graph, with loops, loss or changing links. Its cost grows with the fleet:
 every agent processes every agent's detections (about 72 bytes each on the wire, against ~4.8 kB for one
-trajectory belief).
+trajectory belief). To keep that cost down, a step's detections — this agent's own, then each received
+batch in the order it arrived — are held and applied together once every message of the step is in
+(:meth:`FloodExchange.settle`, :meth:`agent.beliefs.tracking.Tracker.update_scans`): one scan at a time
+as before, against marginals and gate distances computed once per step.
 
 Messages: ``{"increments": [[origin, n, bearings], ...], "acks": {origin: [highest, mask]}}`` with the
 bearings as in :mod:`agent.beliefs.bearing_codec`. A message is sent when an increment is due
@@ -37,11 +40,16 @@ class FloodExchange(TrackExchange):
         model = self.tracker.model
         self.relay = FloodRelay(self.me, self.sender.config.ack_timeout, (model.window - 1) * model.step)
         self.too_old = 0  # received detections that no longer fit the trajectory window
+        self.held: list[list[Bearing]] = []  # this step's scans, applied by settle
 
     def absorb(self, t: float, observations: Observations) -> None:
-        super().absorb(t, observations)
+        """This step's own detections: flooded now, applied with the peers' ones in :meth:`settle`."""
+        self.tracker.advance(self.tracker.model.epoch_of(t))
+        self.last_bearings = self._usable(observations.get("bearings", []))
+        self.report_measurements(t, self.last_bearings)
         if self.last_bearings:
             self.relay.originate(min(b.t for b in self.last_bearings), encode_bearings(self.last_bearings))
+            self.held.append(self.last_bearings)
 
     # -- sending ----------------------------------------------------------------------------------
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
@@ -67,22 +75,26 @@ class FloodExchange(TrackExchange):
         for source, n, rows, bearings in increments:
             when = min(b.t for b in bearings)
             if self.relay.accept(origin, t, source, n, when, rows):
-                self._apply(bearings)
+                self.held.append(bearings)
                 self.latencies.append(t - when)
                 methods.append(("exact", None))
         return methods
 
-    def _apply(self, bearings: list[Bearing]) -> None:
-        """A peer's detections, applied at their own times like this agent's own."""
+    def settle(self, t: float) -> None:
+        """Apply the step's held scans, each at its own time: the tracker first advances to the newest of
+        them (a peer's clock may be a little ahead), then a detection the window no longer reaches is
+        counted in ``too_old`` and dropped."""
+        scans, self.held = self.held, []
+        if not scans:
+            return
         model = self.tracker.model
-        newest = max(model.epoch_of(b.t) for b in bearings)
+        newest = max(model.epoch_of(b.t) for scan in scans for b in scan)
         if newest > self.tracker.epoch:
             self.tracker.advance(newest)
         oldest = self.tracker.epoch - model.window + 1
-        usable = [b for b in bearings if model.epoch_of(b.t) >= oldest]
-        self.too_old += len(bearings) - len(usable)
-        if usable:
-            self.tracker.update(usable)
+        usable = [[b for b in scan if model.epoch_of(b.t) >= oldest] for scan in scans]
+        self.too_old += sum(len(scan) for scan in scans) - sum(len(scan) for scan in usable)
+        self.tracker.update_scans([scan for scan in usable if scan])
 
     def _decode(self, payload: dict) -> tuple[list, dict[str, Held]]:
         """Everything checked before anything is applied: a bad message changes nothing. The wire's schema

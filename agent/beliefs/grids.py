@@ -138,6 +138,9 @@ class GridExchange:
     def thinned(self, message: Outgoing) -> None:
         self.grids_thinned += 1
 
+    def settle(self, t: float) -> None:
+        """Nothing held back: received grids are fused as they arrive."""
+
     def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
                 t: float) -> list[tuple[str, str | None]]:
         """Decode and fuse a neighbour's grid message. Raises :class:`agent.net.wire.DecodeError` on a bad

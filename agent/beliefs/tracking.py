@@ -58,7 +58,13 @@ from agent.sensors.bearing import Bearing
 from fusion.channel_filter import ChannelFilter, Received
 from fusion.gaussian import Gaussian, UninformativeBeliefError
 from fusion.imm_window import ImmWindow, ImmWindowModel
-from fusion.measurement import Bearing3D, PositionMeasurement
+from fusion.measurement import (
+    Bearing3D,
+    PositionMeasurement,
+    bearing3d_linearization,
+    bearing_gate_distances,
+    wrap_angle,
+)
 from fusion.motion import ConstantVelocity, DampedVelocity
 from fusion.resync import Edge
 from fusion.trajectory import Trajectory, TrajectoryModel, intersect_on_newest
@@ -118,11 +124,15 @@ class Tracker:
         self.tracks: dict[int, Track] = {}
         self.labels: dict[tuple[str, int], int] = {}  # (peer, remote track id) -> local track id
         self._next_id = 0
-        self._models: dict[int, tuple[Bearing, Bearing3D]] = {}  # id(bearing) -> its model, for one update
+        self._held: dict[int, list[tuple[Bearing, int]]] = {}  # track id -> (bearing, offset): see _add_held
+        self._predictions: dict[tuple[int, int, int], Gaussian] = {}  # see _prediction; emptied by advance
+        self._gated: dict[tuple[int, int], float] = {}  # (id(bearing), track id) -> d^2, for one update
 
     # -- time -----------------------------------------------------------------------------------
     def advance(self, epoch: int) -> None:
         """Predict every track to grid index ``epoch`` and delete the ones nobody sees any more."""
+        if epoch > self.epoch:
+            self._predictions = {}
         self.epoch = max(self.epoch, epoch)
         for track in list(self.tracks.values()):
             track.belief = track.belief.advanced_to(self.epoch)
@@ -146,27 +156,44 @@ class Tracker:
 
     # -- own measurements -----------------------------------------------------------------------
     def update(self, bearings: list[Bearing], by_label: bool = False) -> dict[str, int]:
-        """Associate and apply this step's bearings. Returns counts of what happened to them."""
+        """Associate and apply one scan of bearings (one sensor's detections of one time). Returns counts of
+        what happened to them."""
+        return self.update_scans([bearings], by_label)
+
+    def update_scans(self, scans: list[list[Bearing]], by_label: bool = False) -> dict[str, int]:
+        """Associate and apply several scans in turn — e.g. every agent's detections received in one step
+        under ``flood`` — each as :meth:`update` would: one detection per track and scan (Hungarian on
+        Merino (3.64)), then initiation from the detections outside every gate. Gating uses the epoch's
+        predictions (:meth:`_prediction`), so the distances of every scan against the tracks that exist at
+        the start are computed together, in one vectorised call. Returns counts of what happened."""
         counts = {"updated": 0, "initiated": 0, "unused": 0} | ({} if self.initiator is None else {"candidate": 0})
-        self._models = {}
-        if by_label:
-            pairs = self._pairs_by_label(bearings)
-        else:
-            pairs = self._pairs_by_distance(bearings)
+        self._gated = {}
+        if not by_label:
+            self._distances([b for scan in scans for b in scan])
+        for bearings in scans:
+            self._apply_scan(bearings, by_label, counts)
+        self._add_held()
+        if self.initiator is not None:
+            for handover in self.initiator.ready(self.epoch * self.model.step):
+                self._hand_over(handover)
+                counts["initiated"] += 1
+        return counts
+
+    def _apply_scan(self, bearings: list[Bearing], by_label: bool, counts: dict[str, int]) -> None:
+        pairs = self._pairs_by_label(bearings) if by_label else self._pairs_by_distance(bearings)
         used = set()
         for b_index, track_id in pairs:
-            track = self.tracks[track_id]
-            bearing = bearings[b_index]
             used.add(b_index)
-            updated = self._measure(track.belief, bearing)
-            if updated is None:
+            track = self.tracks.get(track_id)  # None: deleted as lost by a duplicate confirmed before it
+            bearing = bearings[b_index]
+            if track is None or not self._measure(track, bearing):
                 counts["unused"] += 1
                 continue
-            track.belief = updated
             track.hits += 1
             track.last_measured = max(track.last_measured, bearing.t)
             if not track.confirmed and track.hits >= self.config.confirm_hits:
                 track.confirmed = True
+                self._add_held()  # the duplicate test compares the tracks' estimates
                 if not by_label and self._duplicate(track):
                     self._delete(track.id)
             counts["updated"] += 1
@@ -182,11 +209,6 @@ class Tracker:
                 counts["initiated"] += 1
             else:
                 counts["unused"] += 1
-        if self.initiator is not None:
-            for handover in self.initiator.ready(self.epoch * self.model.step):
-                self._hand_over(handover)
-                counts["initiated"] += 1
-        return counts
 
     def _hand_over(self, handover) -> None:
         """A converged particle candidate becomes a track: its Gaussian is the first position measurement."""
@@ -222,32 +244,78 @@ class Tracker:
                 return True
         return False
 
-    def _model(self, bearing: Bearing) -> Bearing3D:
-        """The bearing's measurement model (Merino (3.52)), built and its ``R`` checked once per update call:
-        association compares it with every track, then the update applies it."""
-        known = self._models.get(id(bearing))
-        if known is None or known[0] is not bearing:
-            known = self._models[id(bearing)] = (bearing, Bearing3D(STATE_DIM, bearing.sensor, bearing.R))
-        return known[1]
+    def _measure(self, track: Track, bearing: Bearing) -> bool:
+        """Apply one detection to a track, as a bearing or as a geolocated position; ``False`` when it cannot
+        be: the ray misses the terrain, so a position cannot be formed, or the detection is older than the
+        belief's window (an IMM track younger than the detection).
 
-    def _measure(self, belief, bearing: Bearing):
-        """Apply one detection to a belief, as a bearing or as a geolocated position (``None``: the ray
-        misses the terrain, so a position cannot be formed, or the detection is older than the belief's
-        window — an IMM track younger than the detection)."""
+        A bearing on a trajectory is held and added with the update's others (:meth:`_add_held`), linearised
+        at the epoch's prediction; an IMM window linearises each of its modes itself, at once."""
+        belief = track.belief
         offset = self._offset(bearing)
         if belief.epoch - offset < belief.oldest:
-            return None
+            return False
+        if self.config.measurement == "bearing" and isinstance(belief, Trajectory):
+            self._held.setdefault(track.id, []).append((bearing, offset))
+            return True
         if self.config.measurement == "bearing":
-            return belief.eif_update(self._model(bearing), bearing.azel, offset)
+            track.belief = belief.eif_update(Bearing3D(STATE_DIM, bearing.sensor, bearing.R), bearing.azel, offset)
+            return True
         located = self._geolocate(bearing)
         if located is None:
-            return None
+            return False
         where = PositionMeasurement(STATE_DIM, located[1])
-        return belief.update(where.H, where.R_inv, located[0], offset)
+        track.belief = belief.update(where.H, where.R_inv, located[0], offset)
+        return True
+
+    def _add_held(self) -> None:
+        """Add the held bearings to their tracks, all at once: the extended information update (Merino (3.52))
+        ``Y += H^T R^-1 H``, ``y += H^T R^-1 [z - h(mu_bar) + H mu_bar]`` with ``h``, ``H`` those of
+        :class:`fusion.measurement.Bearing3D` at the epoch's prediction ``mu_bar`` (:meth:`_prediction`),
+        computed for every bearing in one vectorised call, then one copy of each track's window
+        (:meth:`fusion.trajectory.Trajectory.add_information`)."""
+        held = [(self.tracks[tid], b, offset) for tid, items in self._held.items() if tid in self.tracks
+                for b, offset in items]
+        self._held = {}
+        if not held:
+            return
+        points = np.array([self._prediction(track, offset).mean[:3] for track, _, offset in held])
+        sensors = np.array([b.sensor for _, b, _ in held])
+        z_hat, J, _ = bearing3d_linearization(points, sensors)  # defined: each pair passed its gate there
+        nu = np.array([b.azel for _, b, _ in held]) - z_hat
+        nu[:, 0] = wrap_angle(nu[:, 0])
+        R = np.array([b.R for _, b, _ in held])
+        a, b_, c = R[:, 0, 0], R[:, 0, 1], R[:, 1, 1]
+        R_inv = np.stack([np.stack([c, -b_], -1), np.stack([-b_, a], -1)], -2) / (a * c - b_ * b_)[:, None, None]
+        JtRi = np.swapaxes(J, -1, -2) @ R_inv
+        infos = JtRi @ J
+        vectors = (JtRi @ (nu + (J @ points[..., None])[..., 0])[..., None])[..., 0]
+        by_track: dict[int, list[int]] = {}
+        for j, (track, _, _) in enumerate(held):
+            by_track.setdefault(track.id, []).append(j)
+        offsets = np.array([offset for _, _, offset in held])
+        for tid, rows in by_track.items():
+            track = self.tracks[tid]
+            track.belief = track.belief.add_information(offsets[rows], infos[rows], vectors[rows])
 
     def _geolocate(self, bearing: Bearing):
         return geolocate(bearing.sensor, bearing.azel, bearing.R, self.terrain,
                          sensor_sigma=self.config.sensor_sigma, terrain_sigma=self.config.terrain_sigma)
+
+    def _prediction(self, track: Track, offset: int) -> Gaussian:
+        """The track's marginal on the state ``offset`` steps before the newest, as it was the first time this
+        epoch asked for it: the prediction ``mu_bar_t, P_bar_t`` for the first detections of an epoch.
+
+        Every detection of one epoch is gated (Merino (3.64)) and linearised ((3.52)) against it, as the
+        extended information filter linearises all of a step's measurements at the prediction — so its
+        contributions add up whatever their order. Otherwise each peer's detections flooded in
+        (:mod:`agent.beliefs.flood`) would recompute the window's marginal after every update: N of them per
+        step for N agents. Emptied when the tracker advances to a new epoch."""
+        key = (track.id, track.belief.epoch, offset)
+        known = self._predictions.get(key)
+        if known is None:
+            known = self._predictions[key] = track.belief.state(offset)
+        return known
 
     def _offset(self, bearing: Bearing) -> int:
         offset = self.epoch - self.model.epoch_of(bearing.t)
@@ -255,30 +323,44 @@ class Tracker:
             raise ValueError(f"bearing at t={bearing.t} is outside the window ending at epoch {self.epoch}")
         return offset
 
-    def _bearing_distance(self, track: Track, bearing: Bearing) -> float:
-        """Merino (3.64) against the track's state at the bearing's time (a peer's bearing may be older)."""
-        offset = self._offset(bearing)
-        est = track.estimate() if offset == 0 else track.belief.state(offset)
-        model = self._model(bearing)
-        z_hat, H = model.linearize(est.mean)
-        nu0, nu1 = model.residual(bearing.azel, z_hat).tolist()
-        J = H[:, :3]  # a bearing sees the position only
-        (a, b), (_, d) = (J @ est.cov[:3, :3] @ J.T + bearing.R).tolist()  # S = H P H^T + R, 2x2 symmetric
-        det = a * d - b * b
-        if not det > 0.0:
-            raise np.linalg.LinAlgError("innovation covariance is not positive definite")
-        return (d * nu0 * nu0 - 2.0 * b * nu0 * nu1 + a * nu1 * nu1) / det  # nu^T S^-1 nu, S^-1 in closed form
-
     def _distances(self, bearings: list[Bearing]) -> tuple[list[int], np.ndarray]:
+        """Merino (3.64) of every bearing against every track's predicted state at the bearing's time (a peer's
+        bearing may be older; :meth:`_prediction`): the track ids and an ``(m, tracks)`` cost matrix,
+        ``_UNASSIGNED`` where a distance does not exist (the state is not observable, the bearing is outside
+        the window or undefined there). Pairs are kept for the rest of the update: each is computed once, and
+        those missing are computed together (:func:`fusion.measurement.bearing_gate_distances`)."""
         ids = list(self.tracks)
-        cost = np.full((len(bearings), len(ids)), _UNASSIGNED)
-        for j, track_id in enumerate(ids):
-            for i, bearing in enumerate(bearings):
-                try:
-                    cost[i, j] = self._bearing_distance(self.tracks[track_id], bearing)
-                except (UninformativeBeliefError, ValueError, np.linalg.LinAlgError):
-                    pass
+        missing = [b for b in bearings if any((id(b), t) not in self._gated for t in ids)]
+        if missing and ids:
+            self._gate(missing, ids)
+        cost = np.array([[self._gated[(id(b), t)] for t in ids] for b in bearings]).reshape(len(bearings), len(ids))
         return ids, cost
+
+    def _gate(self, bearings: list[Bearing], ids: list[int]) -> None:
+        """Fill ``_gated`` for every pair of ``bearings`` and tracks ``ids``, one vectorised call per state offset."""
+        by_offset: dict[int, list[Bearing]] = {}
+        for b in bearings:
+            try:
+                by_offset.setdefault(self._offset(b), []).append(b)
+            except ValueError:  # outside the window: no distance to anything
+                self._gated.update({(id(b), t): _UNASSIGNED for t in ids})
+        for offset, rows in by_offset.items():
+            tracks, means, covs = [], [], []
+            for t in ids:
+                try:
+                    est = self._prediction(self.tracks[t], offset)
+                    means.append(est.mean[:3])
+                    covs.append(est.cov[:3, :3])
+                    tracks.append(t)
+                except (UninformativeBeliefError, ValueError):
+                    self._gated.update({(id(b), t): _UNASSIGNED for b in rows})
+            if not tracks:
+                continue
+            d2 = bearing_gate_distances(np.array([b.sensor for b in rows]), np.array([b.azel for b in rows]),
+                                        np.array([b.R for b in rows]), np.array(means), np.array(covs))
+            d2 = np.where(np.isfinite(d2), d2, _UNASSIGNED).tolist()
+            for i, b in enumerate(rows):
+                self._gated.update({(id(b), t): d2[i][j] for j, t in enumerate(tracks)})
 
     def _pairs_by_distance(self, bearings: list[Bearing]) -> list[tuple[int, int]]:
         if not bearings or not self.tracks:

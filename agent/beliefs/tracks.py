@@ -88,8 +88,15 @@ class TrackExchange:
         bearings = self._usable(observations.get("bearings", []))
         self.tracker.update(bearings)
         self.last_bearings = bearings
+        self.report_measurements(t, bearings)
+
+    def report_measurements(self, t: float, bearings: list[Bearing]) -> None:
+        """The raw bearings, to the simulator's centralized oracle (simulation only, not radio traffic)."""
         self.outbox.to_simulator("measurement", t, {"bearings": [
             {"t": b.t, "sensor": b.sensor, "azel": b.azel, "R": b.R, "truth": b.truth_id} for b in bearings]})
+
+    def settle(self, t: float) -> None:
+        """Nothing held back: received tracks are fused as they arrive."""
 
     def _usable(self, bearings: list[Bearing]) -> list[Bearing]:
         """Bearings the trajectory window can still take (a camera that waited for a late pose may hand

@@ -33,6 +33,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 ACK_SPAN = 64  # increments acknowledged below the highest one, per origin; chosen here (>> a window)
+_MASK_LIMIT = 1 << ACK_SPAN
 
 
 class Held:
@@ -67,12 +68,12 @@ class Held:
     @classmethod
     def from_wire(cls, entry) -> Held:
         """From ``[high, mask]`` as sent; ``ValueError`` if it is not two integers in range."""
-        if not isinstance(entry, list | tuple) or len(entry) != 2:
+        if type(entry) not in (list, tuple) or len(entry) != 2:  # on every entry of every message: no isinstance
             raise ValueError("an acknowledgement must be [highest, mask]")
         high, mask = entry
-        if not all(isinstance(v, int) and not isinstance(v, bool) for v in (high, mask)):
+        if type(high) is not int or type(mask) is not int:  # not bool either
             raise ValueError("an acknowledgement holds two integers")
-        if high < -1 or not 0 <= mask < (1 << ACK_SPAN):
+        if high < -1 or not 0 <= mask < _MASK_LIMIT:
             raise ValueError(f"acknowledgement out of range: highest {high}, mask {mask}")
         return cls(high, mask)
 

@@ -46,7 +46,7 @@ class Topology:
         self._heard: dict[str, float] = {}  # peer -> last time heard
         self._reports: dict[str, tuple[float, frozenset[str]]] = {}  # agent -> (report time, its neighbours)
         self._news: dict[str, str] = {}  # agent -> the peer its newest report came from, since our last message
-        self._version = 0  # counts the reports learnt, for the edge memo
+        self._version = 0  # counts changes of the known graph, for the edge memo
         self._sent_mine: list[str] | None = None  # our neighbours in our last message, and when we sent it
         self._sent_at = -float("inf")
         self._cache: tuple[frozenset, frozenset] | None = None  # (known graph, its bridges): graphs change rarely
@@ -65,9 +65,11 @@ class Topology:
         for agent, (when, neighbours) in reports.items():
             if agent == self.me or (agent in self._reports and when <= self._reports[agent][0]):
                 continue
+            known = self._reports.get(agent)
             self._reports[agent] = (float(when), frozenset(neighbours))
             self._news[agent] = sender
-            self._version += 1
+            if known is None or known[1] != self._reports[agent][1] or t - known[0] > report_lifetime(self.timeout):
+                self._version += 1  # the graph may differ: a beacon that repeats a fresh report leaves it
 
     def outgoing(self, t: float) -> dict | None:
         """The topology message due at ``t``, or ``None``: our own report when our neighbours changed or a

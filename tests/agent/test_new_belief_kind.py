@@ -41,6 +41,9 @@ class CountExchange:
     def thinned(self, message):
         pass
 
+    def settle(self, t):
+        pass
+
     def receive(self, origin, seq, stamp, payload, edge, t):
         if not isinstance(payload.get("count"), int):
             raise wire.DecodeError("bad_field", "count must be an integer")

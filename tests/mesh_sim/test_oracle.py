@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from agent.config import AgentScenario
 from agent.net import wire
 from fusion.network import hop_distances
-from mesh_sim.oracle import InFlightOracle
+from mesh_sim.oracle import InFlightOracle, Oracle
 
 STEP = 0.2
 
@@ -51,3 +52,30 @@ def test_without_a_radio_plan_every_agent_is_one_hop_away():
     assert [n for n, o in oracle.oracles.items() if o.tracker.tracks] == ["uav2"]
     oracle.evaluate([], STEP)
     assert all(o.tracker.tracks for o in oracle.oracles.values())
+
+
+BAD_BEARINGS = {
+    "no bearings list": {},
+    "a sensor of two coordinates": {"bearings": [{"t": 0.0, "sensor": [0.0, 0.0], "azel": [0.3, -1.2],
+                                                  "R": np.eye(2) * 1e-4, "truth": "T"}]},
+    "a NaN azimuth": {"bearings": [{"t": 0.0, "sensor": [0.0, 0.0, -80.0], "azel": [np.nan, -1.2],
+                                    "R": np.eye(2) * 1e-4, "truth": "T"}]},
+    "a covariance that is not positive definite": {"bearings": [{"t": 0.0, "sensor": [0.0, 0.0, -80.0],
+                                                                 "azel": [0.3, -1.2], "R": -np.eye(2), "truth": "T"}]},
+    "a time that is not a number": {"bearings": [{"t": "now", "sensor": [0.0, 0.0, -80.0], "azel": [0.3, -1.2],
+                                                  "R": np.eye(2) * 1e-4, "truth": "T"}]},
+}
+
+
+@pytest.mark.parametrize("fault", sorted(BAD_BEARINGS))
+def test_a_malformed_measurement_message_is_rejected_and_the_good_ones_of_its_tick_still_apply(fault):
+    """The oracle holds a tick's messages and applies them together at ``evaluate``: a bad one is counted in
+    ``rejected`` when it arrives and takes nothing else with it."""
+    oracle = Oracle(AgentScenario.from_dict({"agents": 2}))
+    bad = wire.Envelope(kind="measurement", origin="uav1", seq=1, stamp=0.0, payload=BAD_BEARINGS[fault])
+    oracle.add(bad, 0.0)
+    oracle.add(bearings_of("uav0", 0.0), 0.0)
+    assert oracle.rejected == 1, fault
+    assert not oracle.tracker.tracks  # held until the tick is scored
+    oracle.evaluate([])
+    assert len(oracle.tracker.tracks) == 1 and oracle.late == 0

@@ -87,6 +87,7 @@ def run(measurement: str, motion: str, steps: int = 12, settle: int = 4):
             for env in delivered[name]:
                 ex.topology.heard(env.origin, t)
                 ex.receive(env.origin, env.seq, env.stamp, env.payload, False, t)
+            ex.settle(t)
             message = ex.outgoing(t, neighbours(name))
             if message is None:
                 continue
@@ -116,11 +117,11 @@ def test_on_a_graph_with_loops_every_agent_equals_the_centralized_tracker(measur
             if measurement == "position":  # linear updates commute: equal to rounding
                 np.testing.assert_allclose(g.mean, e.mean, rtol=1e-9, atol=1e-9, err_msg=name)
                 np.testing.assert_allclose(g.Y, e.Y, rtol=1e-9, atol=1e-9 * np.abs(e.Y).max(), err_msg=name)
-            else:  # bearings are linearised where each tracker stands when it applies them (order of arrival)
+            else:  # a late bearing is linearised where the tracker stands in the epoch it arrives in
                 d = g.mean - e.mean
-                # within 5 % of a standard deviation; an IMM's mode probabilities carry the order further: 15 %
-                # (measured 9 % at most)
-                tolerance = 0.15 if motion == "imm" else 0.05
+                # within 10 % of a standard deviation (measured 6.7 % at most); an IMM's mode probabilities carry
+                # the order further: 15 % (measured 9.4 % at most)
+                tolerance = 0.15 if motion == "imm" else 0.10
                 assert d @ e.Y @ d < tolerance**2, (name, d)
                 np.testing.assert_allclose(g.Y, e.Y, rtol=0.05, atol=0.05 * np.abs(e.Y).max(), err_msg=name)
         metrics = ex.metrics()["flood"]
