@@ -125,19 +125,20 @@ class Tracker:
         self.labels: dict[tuple[str, int], int] = {}  # (peer, remote track id) -> local track id
         self._next_id = 0
         self._held: dict[int, list[tuple[Bearing, int]]] = {}  # track id -> (bearing, offset): see _add_held
-        self._predictions: dict[tuple[int, int, int], Gaussian] = {}  # see _prediction; emptied by advance
+        self._predicted: dict[int, Trajectory | ImmWindow] = {}  # track id -> its belief at this epoch's start
         self._gated: dict[tuple[int, int], float] = {}  # (id(bearing), track id) -> d^2, for one update
 
     # -- time -----------------------------------------------------------------------------------
     def advance(self, epoch: int) -> None:
         """Predict every track to grid index ``epoch`` and delete the ones nobody sees any more."""
-        if epoch > self.epoch:
-            self._predictions = {}
+        new_epoch = epoch > self.epoch
         self.epoch = max(self.epoch, epoch)
         for track in list(self.tracks.values()):
             track.belief = track.belief.advanced_to(self.epoch)
             if self._expired(track):
                 self._delete(track.id)
+        if new_epoch:
+            self._predicted = {tid: track.belief for tid, track in self.tracks.items()}
 
     def _expired(self, track: Track) -> bool:
         if not track.confirmed and self.epoch - track.created_epoch >= self.config.confirm_within:
@@ -303,19 +304,19 @@ class Tracker:
                          sensor_sigma=self.config.sensor_sigma, terrain_sigma=self.config.terrain_sigma)
 
     def _prediction(self, track: Track, offset: int) -> Gaussian:
-        """The track's marginal on the state ``offset`` steps before the newest, as it was the first time this
-        epoch asked for it: the prediction ``mu_bar_t, P_bar_t`` for the first detections of an epoch.
+        """The track's marginal on the state ``offset`` steps before the newest as it stood when the tracker
+        advanced to this epoch (or when the track started): for ``offset = 0`` the prediction ``mu_bar_t,
+        P_bar_t``.
 
         Every detection of one epoch is gated (Merino (3.64)) and linearised ((3.52)) against it, as the
         extended information filter linearises all of a step's measurements at the prediction — so its
-        contributions add up whatever their order. Otherwise each peer's detections flooded in
+        contributions add up whatever their order or grouping. Otherwise each peer's detections flooded in
         (:mod:`agent.beliefs.flood`) would recompute the window's marginal after every update: N of them per
-        step for N agents. Emptied when the tracker advances to a new epoch."""
-        key = (track.id, track.belief.epoch, offset)
-        known = self._predictions.get(key)
-        if known is None:
-            known = self._predictions[key] = track.belief.state(offset)
-        return known
+        step for N agents. (A belief computes each marginal once.)"""
+        start = self._predicted.get(track.id)
+        if start is None or start.epoch != track.belief.epoch:  # started this epoch, or moved by a peer's belief
+            start = self._predicted[track.id] = track.belief
+        return start.state(offset)
 
     def _offset(self, bearing: Bearing) -> int:
         offset = self.epoch - self.model.epoch_of(bearing.t)

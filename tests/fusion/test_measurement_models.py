@@ -8,7 +8,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fusion.measurement import Bearing2D, Bearing3D, PositionMeasurement, azel_to_los, los_to_azel, wrap_angle
+from fusion.measurement import (
+    MIN_RHO2,
+    Bearing2D,
+    Bearing3D,
+    PositionMeasurement,
+    azel_to_los,
+    bearing3d_linearization,
+    bearing_gate_distances,
+    los_to_azel,
+    wrap_angle,
+)
 
 SETTINGS = settings(max_examples=80, deadline=None)
 
@@ -177,3 +187,40 @@ def test_bearing3d_target_at_or_straight_below_sensor_raises(offset):
         model.h(x)
     with pytest.raises(ValueError, match="azimuth is undefined"):
         model.jacobian(x)
+
+
+def _scalar_gate_distance(sensor, azel, R, mean, cov) -> float:
+    """Merino (3.64) written out with the per-bearing model: nu^T (H P H^T + R)^-1 nu."""
+    model = Bearing3D(6, sensor, R)
+    x = np.concatenate([mean, np.zeros(3)])
+    z_hat, H = model.linearize(x)
+    nu = model.residual(azel, z_hat)
+    P = np.zeros((6, 6))
+    P[:3, :3] = cov
+    return float(nu @ np.linalg.solve(H @ P @ H.T + R, nu))
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_vectorised_bearing_geometry_equals_the_per_bearing_model(seed):
+    """bearing3d_linearization and bearing_gate_distances against Bearing3D, pair by pair (azimuths across
+    the +-pi cut included), and the pairs where a bearing is undefined come out NaN."""
+    rng = np.random.default_rng(seed)
+    sensors = np.array([random_geometry(rng, 3)[0] for _ in range(4)])
+    means = np.array([random_geometry(rng, 3)[1] for _ in range(3)])
+    means[0, :2] = sensors[0, :2]  # straight below the first sensor: no azimuth
+    azel = np.column_stack([rng.uniform(-np.pi, np.pi, 4), rng.uniform(-1.4, -0.2, 4)])
+    R = np.array([np.diag(rng.uniform(1e-5, 1e-3, 2)) for _ in range(4)])
+    covs = np.array([(lambda A: A @ A.T + np.eye(3))(rng.normal(size=(3, 3))) for _ in range(3)])
+    d2 = bearing_gate_distances(sensors, azel, R, means, covs)
+    z_hat, J, rho2 = bearing3d_linearization(means[None], sensors[:, None])
+    for i in range(4):
+        for j in range(3):
+            if i == 0 and j == 0:
+                assert np.isnan(d2[i, j]) and rho2[i, j] < MIN_RHO2
+                continue
+            model = Bearing3D(6, sensors[i], R[i])
+            h, H = model.linearize(np.concatenate([means[j], np.zeros(3)]))
+            np.testing.assert_allclose(z_hat[i, j], h, rtol=1e-12)
+            np.testing.assert_allclose(J[i, j], H[:, :3], rtol=1e-10, atol=1e-15)
+            assert d2[i, j] == pytest.approx(_scalar_gate_distance(sensors[i], azel[i], R[i], means[j], covs[j]),
+                                             rel=1e-9)

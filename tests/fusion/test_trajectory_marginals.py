@@ -76,3 +76,27 @@ def test_an_offset_outside_the_window_and_a_singular_state_are_errors():
     singular = Trajectory(np.zeros(MODEL.dim), np.zeros((MODEL.dim, MODEL.dim)), 0, MODEL)  # no information
     with pytest.raises(UninformativeBeliefError, match="singular information"):
         singular.state(2)
+
+
+def test_several_measurements_added_at_once_equal_one_update_each():
+    """Trajectory.add_information (one copy for all) against Trajectory.update per measurement (Merino
+    (3.29)-(3.30)), on position blocks of different states, two on the same state; bad terms are refused."""
+    rng = np.random.default_rng(3)
+    belief = _observed(3)
+    offsets = [0, 2, 2, 7]
+    H = np.hstack([np.eye(3), np.zeros((3, 3))])
+    infos, vectors, sequential = [], [], belief
+    for offset in offsets:
+        A = rng.normal(size=(3, 3))
+        R_inv = A @ A.T + np.eye(3)
+        z = rng.normal(size=3)
+        infos.append(R_inv)
+        vectors.append(R_inv @ z)
+        sequential = sequential.update(H, R_inv, z, offset)
+    at_once = belief.add_information(offsets, np.array(infos), np.array(vectors))
+    assert at_once.allclose(sequential, rtol=1e-12, atol=1e-12)
+    assert belief.allclose(_observed(3))  # the belief itself is unchanged
+    with pytest.raises(ValueError, match="outside the window"):
+        belief.add_information([MODEL.window], np.array(infos[:1]), np.array(vectors[:1]))
+    with pytest.raises(ValueError, match="non-finite"):
+        belief.add_information([0], np.full((1, 3, 3), np.nan), np.array(vectors[:1]))

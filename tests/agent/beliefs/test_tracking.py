@@ -595,3 +595,39 @@ def test_a_track_whose_newest_state_is_not_fully_observable_is_not_an_estimate()
     with pytest.raises(UninformativeBeliefError):
         track.estimate().cov  # noqa: B018
     assert tracker.estimates() == []
+
+
+def test_a_steps_scans_applied_together_equal_one_update_per_scan(monkeypatch):
+    """``update_scans`` (what flood applies once per step) against one ``update`` per scan in the same epoch:
+    every detection of an epoch is gated and linearised at the epoch's prediction (Merino (3.52)), so holding
+    a step's bearings and adding them at once gives the same tracks; and each track's window marginal is
+    computed once per offset and step, not after every scan."""
+    from fusion import trajectory
+
+    marginals = []
+    original = trajectory.Trajectory._marginal
+    monkeypatch.setattr(trajectory.Trajectory, "_marginal", lambda self, k: marginals.append(k) or original(self, k))
+    sensors = [clean_sensor(7 + i) for i in range(len(CROSSING_CAMERAS))]
+    one_by_one, together = Tracker(TrackerConfig(), STEP, GROUND), Tracker(TrackerConfig(), STEP, GROUND)
+    checked = 0
+    for k in range(40):
+        t = k * STEP
+        truth = crossing(t)
+        scans = [sensor.detect(t, camera, truth) for sensor, camera in zip(sensors, CROSSING_CAMERAS, strict=True)]
+        late = [[dataclasses.replace(b, t=t - STEP) for b in scans[0]]] if k else []  # a peer's, one step late
+        one_by_one.advance(k)
+        for scan in scans + late:
+            one_by_one.update(scan)
+        together.advance(k)
+        tracks = len(together.tracks)
+        marginals.clear()
+        together.update_scans(scans + late)
+        if k > 10 and len(together.tracks) == tracks:  # no track started: every marginal asked is a prediction
+            assert len(marginals) <= 2 * tracks  # offsets 0 and 1 (one update per scan would ask ~5 per track)
+            checked += 1
+    assert checked >= 20
+    got, expected = together.estimates(), one_by_one.estimates()
+    assert len(got) == len(expected) == 2
+    for (_, g), (_, e) in zip(got, expected, strict=True):
+        np.testing.assert_allclose(g.mean, e.mean, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(g.cov, e.cov, rtol=1e-9, atol=1e-12)
