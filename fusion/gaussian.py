@@ -20,7 +20,6 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf, dpotrs
 
 from fusion import lapack, validation
 
@@ -91,17 +90,16 @@ class Gaussian:
         return self._cov.copy()
 
     def _solve(self, rhs: np.ndarray) -> np.ndarray:
-        """``Y^-1 rhs`` by Cholesky (LAPACK potrf/potrs directly: scipy's wrappers cost ten times more
-        than the arithmetic on a 6x6 matrix)."""
-        factor, info = dpotrf(self.Y, lower=1, clean=0)
-        if info != 0:
+        """``Y^-1 rhs`` by Cholesky (:mod:`fusion.lapack`: scipy's wrappers cost ten times more than the
+        arithmetic on a 6x6 matrix)."""
+        factor = lapack.cholesky(self.Y)
+        if factor is None:
             if not self.has_information:
                 raise UninformativeBeliefError("the belief has no information yet: mean and covariance are undefined")
             raise UninformativeBeliefError(
                 "the information matrix is singular: some direction of the state is unobserved"
             )
-        solution, _ = dpotrs(factor, rhs, lower=1)
-        return solution
+        return lapack.cholesky_solve(factor, rhs)
 
     # -- the belief algebra -----------------------------------------------------------------------
     def fuse(self, other: Gaussian) -> Gaussian:

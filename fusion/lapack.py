@@ -5,7 +5,7 @@ algebra on the hot path is a 6x6 system. ``numpy.linalg.solve`` and ``inv`` spen
 their wrappers (type dispatch, error state) around 1 µs of arithmetic on such a system; calling LAPACK's
 routines through SciPy's thin wrappers costs about 6 µs. The routines are the ones NumPy calls, so the
 results are those of ``numpy.linalg`` (LU with partial pivoting for a general system, Cholesky for a
-symmetric positive-definite one).
+symmetric positive-definite one). Every direct LAPACK call of the library is here.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from scipy.linalg.lapack import dgesv, dpotrf, dpotri
+from scipy.linalg.lapack import dgesv, dpotrf, dpotri, dpotrs, dtrtrs
 
 
 def solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -27,11 +27,28 @@ def solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return x
 
 
+def cholesky(A: np.ndarray) -> np.ndarray | None:
+    """The lower-triangular ``C`` with ``C C^T = A`` (LAPACK ``dpotrf``, upper triangle zeroed), or ``None``
+    when the symmetric matrix ``A`` is not positive definite (the factorisation exists exactly then)."""
+    factor, info = dpotrf(A, lower=1, clean=1)
+    return factor if info == 0 else None
+
+
+def cholesky_solve(factor: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A^-1 B`` from the :func:`cholesky` factor of ``A`` (LAPACK ``dpotrs``)."""
+    return dpotrs(factor, B, lower=1)[0]
+
+
+def triangular_solve(factor: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``C^-1 b`` for the lower-triangular :func:`cholesky` factor ``C`` (LAPACK ``dtrtrs``)."""
+    return dtrtrs(factor, b, lower=1)[0]
+
+
 def spd_inverse(A: np.ndarray) -> np.ndarray:
     """``A^-1`` of a symmetric positive-definite matrix by Cholesky (LAPACK ``dpotrf``/``dpotri``), returned
     exactly symmetric. Raises ``numpy.linalg.LinAlgError`` when ``A`` is not positive definite."""
-    factor, info = dpotrf(A, lower=1, clean=0)
-    if info != 0:
+    factor = cholesky(A)
+    if factor is None:
         raise np.linalg.LinAlgError("the matrix is not positive definite")
     inverse, info = dpotri(factor, lower=1)  # the lower triangle of A^-1; the upper one is left as it was
     if info != 0:

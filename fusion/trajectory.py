@@ -28,7 +28,6 @@ import functools
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf, dtrtrs
 
 from fusion import lapack, validation
 from fusion.covariance_intersection import fast_weights, optimal_weights
@@ -195,10 +194,10 @@ class Trajectory:
         n, L = self.model.state_dim, self.model.window
         order = _last_state_order(n, L, k)
         Y, y = (self.Y, self.y) if order is None else (self.Y.take(order, 0).take(order, 1), self.y.take(order))
-        factor, info = dpotrf(Y, lower=1, clean=1)
-        if info != 0:
+        factor = lapack.cholesky(Y)
+        if factor is None:
             return self._chain_marginal(k)
-        w, _ = dtrtrs(factor, y, lower=1)
+        w = lapack.triangular_solve(factor, y)
         C_k = factor[-n:, -n:]
         return Gaussian(C_k @ w[-n:], C_k @ C_k.T)
 

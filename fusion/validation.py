@@ -7,7 +7,8 @@ bad matrix coming off the wire or out of a config file is rejected before it tou
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf
+
+from fusion import lapack
 
 #: Relative tolerance for symmetry and for the smallest admissible eigenvalue of a PSD matrix.
 #: Chosen here: loose enough for matrices that went through a few float64 operations.
@@ -59,7 +60,7 @@ def as_psd(value, name: str, size: int | None = None) -> np.ndarray:
 def as_pd(value, name: str, size: int | None = None) -> np.ndarray:
     """A symmetric positive-definite matrix, e.g. a covariance or a noise matrix."""
     arr = as_symmetric(value, name, size)
-    if arr.size and dpotrf(arr, lower=1, clean=0)[1] != 0:  # Cholesky exists exactly for positive definite
+    if arr.size and lapack.cholesky(arr) is None:
         raise ValueError(f"{name} is not positive definite")
     return arr
 
@@ -107,8 +108,7 @@ def is_psd(matrix: np.ndarray) -> bool:
     pays for the smallest eigenvalue."""
     if matrix.size == 0:
         return True
-    _, info = dpotrf(matrix, lower=1, clean=0)  # LAPACK directly: numpy's wrapper costs as much as the work
-    if info == 0:
+    if lapack.cholesky(matrix) is not None:  # LAPACK directly: numpy's wrapper costs as much as the work
         return True
     scale = max(1.0, float(np.max(np.abs(matrix))))
     return min_eigenvalue(matrix) >= -PSD_RTOL * scale
