@@ -71,27 +71,17 @@ class Oracle:
         self.held.append((env.stamp, bearings))
 
     def _apply_held(self) -> None:
-        """Every held scan in one update per tracker (:meth:`agent.beliefs.tracking.Tracker.update_scans`), after
-        advancing to the newest of them; a bearing older than the window (a camera bearing that waited for its
-        pose that long) is counted in ``late`` and left out."""
+        """Every held scan in one update per tracker, at the newest message's epoch
+        (:meth:`agent.beliefs.tracking.Tracker.catch_up`); a message with a bearing older than the window (a
+        camera bearing that waited for its pose that long) is counted in ``late``, that bearing left out."""
         held, self.held = self.held, []
         if not held:
             return
-        model = self.tracker.model
-        epoch = max(model.epoch_of(stamp) for stamp, _ in held)
-        if epoch > self.tracker.epoch:
-            self.tracker.advance(epoch)
-            if self.imm is not None:
-                self.imm.advance(epoch)
-        oldest = self.tracker.epoch - model.window + 1
-        scans = []
-        for _, bearings in held:
-            usable = [b for b in bearings if oldest <= model.epoch_of(b.t) <= self.tracker.epoch]
-            self.late += len(usable) < len(bearings)
-            scans.append(usable)
-        self.tracker.update_scans(scans, by_label=True)
+        epoch = max(self.tracker.model.epoch_of(stamp) for stamp, _ in held)
+        scans = [bearings for _, bearings in held]
+        self.late += sum(dropped > 0 for dropped in self.tracker.catch_up(scans, epoch, by_label=True))
         if self.imm is not None:
-            self.imm.update_scans(scans, by_label=True)
+            self.imm.catch_up(scans, epoch, by_label=True)
 
     def evaluate(self, targets) -> None:
         """Apply the held bearings, then score both trackers against the truth."""

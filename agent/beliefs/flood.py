@@ -44,12 +44,10 @@ class FloodExchange(TrackExchange):
 
     def absorb(self, t: float, observations: Observations) -> None:
         """This step's own detections: flooded now, applied with the peers' ones in :meth:`settle`."""
-        self.tracker.advance(self.tracker.model.epoch_of(t))
-        self.last_bearings = self._usable(observations.get("bearings", []))
-        self.report_measurements(t, self.last_bearings)
-        if self.last_bearings:
-            self.relay.originate(min(b.t for b in self.last_bearings), encode_bearings(self.last_bearings))
-            self.held.append(self.last_bearings)
+        bearings = self.own_bearings(t, observations)
+        if bearings:
+            self.relay.originate(min(b.t for b in bearings), encode_bearings(bearings))
+            self.held.append(bearings)
 
     # -- sending ----------------------------------------------------------------------------------
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
@@ -81,20 +79,13 @@ class FloodExchange(TrackExchange):
         return methods
 
     def settle(self, t: float) -> None:
-        """Apply the step's held scans, each at its own time: the tracker first advances to the newest of
-        them (a peer's clock may be a little ahead), then a detection the window no longer reaches is
-        counted in ``too_old`` and dropped."""
+        """Apply the step's held scans, each at its own time, once the tracker has advanced to the newest of
+        them (a peer's clock may be a little ahead); a detection the window no longer reaches is counted in
+        ``too_old`` and dropped (:meth:`agent.beliefs.tracking.Tracker.catch_up`)."""
         scans, self.held = self.held, []
-        if not scans:
-            return
-        model = self.tracker.model
-        newest = max(model.epoch_of(b.t) for scan in scans for b in scan)
-        if newest > self.tracker.epoch:
-            self.tracker.advance(newest)
-        oldest = self.tracker.epoch - model.window + 1
-        usable = [[b for b in scan if model.epoch_of(b.t) >= oldest] for scan in scans]
-        self.too_old += sum(len(scan) for scan in scans) - sum(len(scan) for scan in usable)
-        self.tracker.update_scans([scan for scan in usable if scan])
+        if scans:
+            newest = max(self.tracker.model.epoch_of(b.t) for scan in scans for b in scan)
+            self.too_old += sum(self.tracker.catch_up(scans, newest))
 
     def _decode(self, payload: dict) -> tuple[list, dict[str, Held]]:
         """Everything checked before anything is applied: a bad message changes nothing. The wire's schema

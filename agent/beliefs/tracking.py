@@ -180,6 +180,18 @@ class Tracker:
                 counts["initiated"] += 1
         return counts
 
+    def catch_up(self, scans: list[list[Bearing]], epoch: int, by_label: bool = False) -> list[int]:
+        """Scans gathered over a step or a tick (a peer's clock may be a little ahead, a camera's bearing a
+        little late): advance to grid index ``epoch`` if it is newer, leave out the bearings the window no longer
+        reaches (or that are newer than it), and apply the rest with :meth:`update_scans`. Returns how many
+        bearings of each scan were left out."""
+        if epoch > self.epoch:
+            self.advance(epoch)
+        oldest = self.epoch - self.model.window + 1
+        usable = [[b for b in scan if oldest <= self.model.epoch_of(b.t) <= self.epoch] for scan in scans]
+        self.update_scans([scan for scan in usable if scan], by_label)
+        return [len(scan) - len(kept) for scan, kept in zip(scans, usable, strict=True)]
+
     def _apply_scan(self, bearings: list[Bearing], by_label: bool, counts: dict[str, int]) -> None:
         pairs = self._pairs_by_label(bearings) if by_label else self._pairs_by_distance(bearings)
         used = set()

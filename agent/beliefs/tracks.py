@@ -84,16 +84,17 @@ class TrackExchange:
 
     # -- local ------------------------------------------------------------------------------------
     def absorb(self, t: float, observations: Observations) -> None:
-        self.tracker.advance(self.tracker.model.epoch_of(t))
-        bearings = self._usable(observations.get("bearings", []))
-        self.tracker.update(bearings)
-        self.last_bearings = bearings
-        self.report_measurements(t, bearings)
+        self.tracker.update(self.own_bearings(t, observations))
 
-    def report_measurements(self, t: float, bearings: list[Bearing]) -> None:
-        """The raw bearings, to the simulator's centralized oracle (simulation only, not radio traffic)."""
+    def own_bearings(self, t: float, observations: Observations) -> list[Bearing]:
+        """The step's bearings the trajectory window can take, once the tracker has advanced to ``t``; they are
+        kept for telemetry and reported raw to the simulator's centralized oracle (simulation only, not radio
+        traffic)."""
+        self.tracker.advance(self.tracker.model.epoch_of(t))
+        bearings = self.last_bearings = self._usable(observations.get("bearings", []))
         self.outbox.to_simulator("measurement", t, {"bearings": [
             {"t": b.t, "sensor": b.sensor, "azel": b.azel, "R": b.R, "truth": b.truth_id} for b in bearings]})
+        return bearings
 
     def settle(self, t: float) -> None:
         """Nothing held back: received tracks are fused as they arrive."""
