@@ -119,7 +119,7 @@ def test_on_a_graph_with_loops_every_agent_equals_the_centralized_tracker(measur
                 np.testing.assert_allclose(g.Y, e.Y, rtol=1e-9, atol=1e-9 * np.abs(e.Y).max(), err_msg=name)
             else:  # a late bearing is linearised where the tracker stands in the epoch it arrives in
                 d = g.mean - e.mean
-                # within 10 % of a standard deviation (measured 6.7 % at most); an IMM's mode probabilities carry
+                # within 10 % of a standard deviation (measured 6.6 % at most); an IMM's mode probabilities carry
                 # the order further: 15 % (measured 9.4 % at most)
                 tolerance = 0.15 if motion == "imm" else 0.10
                 assert d @ e.Y @ d < tolerance**2, (name, d)
