@@ -154,8 +154,14 @@ def los_to_azel(line_of_sight) -> np.ndarray:
 
 def azel_to_los(azel) -> np.ndarray:
     """Unit line-of-sight vector in NED for an azimuth/elevation pair."""
-    az, el = validation.as_vector(azel, "azimuth/elevation", 2)
-    return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
+    return azel_to_los_array(validation.as_vector(azel, "azimuth/elevation", 2))
+
+
+def azel_to_los_array(azel: np.ndarray) -> np.ndarray:
+    """:func:`azel_to_los` on an array of pairs ``(..., 2)`` -> ``(..., 3)``, unchecked (the caller's arrays):
+    ``(cos el cos az, cos el sin az, -sin el)``, elevation positive up (NED ``z`` down)."""
+    az, el = azel[..., 0], azel[..., 1]
+    return np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)], -1)
 
 
 def bearing3d_linearization(points, sensors) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

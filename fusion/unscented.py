@@ -42,11 +42,15 @@ def sigma_points(mean, cov, kappa: float | None = None) -> tuple[np.ndarray, np.
 
 
 def unscented_transform(
-    f: Callable[[np.ndarray], np.ndarray], mean, cov, kappa: float | None = None
+    f: Callable[[np.ndarray], np.ndarray], mean, cov, kappa: float | None = None, *, vectorized: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and covariance of ``f(x)`` for ``x ~ N(mean, cov)`` (Merino Alg. 3.5)."""
+    """Mean and covariance of ``f(x)`` for ``x ~ N(mean, cov)`` (Merino Alg. 3.5). ``vectorized``: ``f`` maps
+    all the sigma points at once, rows ``(2n+1, n)`` -> ``(2n+1, m)``, instead of one point at a time."""
     points, weights = sigma_points(mean, cov, kappa)
-    Y = np.array([np.atleast_1d(np.asarray(f(p), dtype=float)) for p in points])
+    if vectorized:
+        Y = np.asarray(f(points), dtype=float).reshape(len(points), -1)
+    else:
+        Y = np.array([np.atleast_1d(np.asarray(f(p), dtype=float)) for p in points])
     if not np.all(np.isfinite(Y)):
         raise ValueError("the transformed sigma points contain non-finite values")
     mu = weights @ Y

@@ -11,23 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from fusion.measurement import azel_to_los
+from fusion.measurement import azel_to_los_array
 from fusion.unscented import unscented_transform
-from perception.terrain import intersect_ray
-
-
-class _RaisedTerrain:
-    """The terrain shifted up by ``dh`` metres (one sigma point of the DEM error)."""
-
-    def __init__(self, base, dh: float):
-        self.base, self.dh = base, dh
-        # Forward the hints that let ray casting take long safe steps (see perception.terrain.intersect_ray).
-        self.max_slope = getattr(base, "max_slope", None)
-        bounds = getattr(base, "height_bounds", None)
-        self.height_bounds = None if bounds is None else (bounds[0] + dh, bounds[1] + dh)
-
-    def height(self, north, east):
-        return self.base.height(north, east) + self.dh
+from perception.projection import cast_rays
 
 
 def geolocate(
@@ -44,7 +30,11 @@ def geolocate(
     The uncertain inputs are ``(az, el, dh, dn, de, dd)``: the bearing with covariance ``R_azel``,
     the DEM error ``dh ~ N(0, terrain_sigma^2)`` and the camera position error
     ``~ N(0, sensor_sigma^2 I)``. Returns ``None`` when the ray (or one of its sigma points) misses
-    the terrain within ``max_range``: such a bearing cannot start a track on its own."""
+    the terrain within ``max_range``: such a bearing cannot start a track on its own.
+
+    All 13 sigma points are cast together (:func:`perception.projection.cast_rays`: in closed form on
+    flat terrain). A terrain raised by ``dh`` is the same geometry as a camera lowered by ``dh``, with the
+    hit then raised back: the ray is cast from ``sensor + (dn, de, dd + dh)`` on the terrain itself."""
     sensor = np.asarray(sensor, float)
     mean = np.concatenate([np.asarray(azel, float), np.zeros(4)])
     cov = np.zeros((6, 6))
@@ -52,11 +42,14 @@ def geolocate(
     cov[2, 2] = terrain_sigma**2
     cov[3:, 3:] = sensor_sigma**2 * np.eye(3)
 
-    def cast(p):
-        hit = intersect_ray(_RaisedTerrain(terrain, p[2]), sensor + p[3:], azel_to_los(p[:2]), max_range=max_range)
-        return np.full(3, np.nan) if hit is None else hit
+    def cast(points: np.ndarray) -> np.ndarray:
+        origins = sensor + points[:, 3:]
+        origins[:, 2] += points[:, 2]  # the camera lowered by dh ...
+        hits = cast_rays(terrain, origins, azel_to_los_array(points[:, :2]), max_range=max_range)
+        hits[:, 2] -= points[:, 2]  # ... and the hit raised back onto the raised terrain
+        return hits
 
     try:
-        return unscented_transform(cast, mean, cov)
+        return unscented_transform(cast, mean, cov, vectorized=True)
     except ValueError:  # a sigma point missed the terrain
         return None

@@ -5,10 +5,10 @@ is its inverse up to scale, the bearing of thesis 000 §2.5 (``R_body->world R_c
 ``pixel_to_ground`` casts that ray on the terrain (Merino §3.6, Ross Eq. 1); ``footprint`` georeferences
 the four image corners (Ross Fig. 3).
 
-Ray casting (:func:`cast_ray`) picks the exact method each terrain allows: a closed form on
-:class:`~perception.terrain.FlatTerrain` (``λ = (-h0 - o_z) / d_z``), the terrain's own ``intersect``
-when it has one (:class:`perception.dem.GridTerrain`: exact per-cell intersection), and otherwise the
-generic root search :func:`perception.terrain.intersect_ray`.
+Ray casting (:func:`cast_ray`; :func:`cast_rays` for many rays at once) picks the exact method each terrain
+allows: a closed form on :class:`~perception.terrain.FlatTerrain` (``λ = (-h0 - o_z) / d_z``), the terrain's
+own ``intersect`` when it has one (:class:`perception.dem.GridTerrain`: exact per-cell intersection), and
+otherwise the generic root search :func:`perception.terrain.intersect_ray`.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from perception.camera import Intrinsics
 from perception.pose import CameraPose
 from perception.terrain import FlatTerrain, Terrain, intersect_ray
 
-__all__ = ["pixel_to_ray_world", "world_to_pixel", "cast_ray", "pixel_to_ground", "footprint"]
+__all__ = ["pixel_to_ray_world", "world_to_pixel", "cast_ray", "cast_rays", "pixel_to_ground", "footprint"]
 
 #: Default longest ray considered when georeferencing (m, chosen here, as in perception.geolocation).
 DEFAULT_MAX_RANGE = 5000.0
@@ -65,23 +65,55 @@ def cast_ray(
         raise ValueError("ray direction must be non-zero")
     d = d / norm
     if isinstance(terrain, FlatTerrain):
-        clearance = -terrain.level - o[2]  # height of the origin above the plane
-        if clearance < 0.0:
-            return None  # starts below the ground
-        if clearance == 0.0:
-            return o.copy()
-        if d[2] <= 0.0:
-            return None  # level or climbing: never reaches the plane
-        lam = clearance / d[2]
-        if lam > max_range:
-            return None
-        hit = o + lam * d
-        hit[2] = -terrain.level  # exactly on the plane
-        return hit
+        hit = _flat_hits(terrain.level, o[None], d[None], max_range)[0]
+        return None if np.isnan(hit[0]) else hit
     own = getattr(terrain, "intersect", None)
     if callable(own):
         return own(o, d, max_range=max_range)
     return intersect_ray(terrain, o, d, max_range=max_range, tol=tol)
+
+
+def cast_rays(
+    terrain: Terrain,
+    origins,
+    directions,
+    max_range: float = DEFAULT_MAX_RANGE,
+    tol: float = DEFAULT_TOL,
+) -> np.ndarray:
+    """:func:`cast_ray` for ``k`` rays at once: origins and directions ``(k, 3)`` -> hits ``(k, 3)``, a row of
+    NaN where a ray misses. Vectorised in closed form on :class:`~perception.terrain.FlatTerrain`; a loop over
+    :func:`cast_ray` otherwise."""
+    o = np.asarray(origins, dtype=float)
+    d = np.asarray(directions, dtype=float)
+    if o.ndim != 2 or o.shape[1:] != (3,) or d.shape != o.shape:
+        raise ValueError(f"ray origins and directions must both have shape (k, 3), got {o.shape} and {d.shape}")
+    if not (np.all(np.isfinite(o)) and np.all(np.isfinite(d))):
+        raise ValueError("ray origins and directions must be finite")
+    norms = np.linalg.norm(d, axis=1)
+    if np.any(norms == 0.0):
+        raise ValueError("ray directions must be non-zero")
+    if isinstance(terrain, FlatTerrain):
+        return _flat_hits(terrain.level, o, d / norms[:, None], max_range)
+    out = np.full(o.shape, np.nan)
+    for k, (origin, direction) in enumerate(zip(o, d, strict=True)):
+        hit = cast_ray(terrain, origin, direction, max_range, tol)
+        if hit is not None:
+            out[k] = hit
+    return out
+
+
+def _flat_hits(level: float, o: np.ndarray, d: np.ndarray, max_range: float) -> np.ndarray:
+    """Rays ``o + λ d`` (unit ``d``, rows) on the plane at height ``level``: ``λ = c / d_z`` with the clearance
+    ``c = -level - o_z`` of the origin above the plane; a ray starting on the plane hits at its origin; one that
+    starts below it (``c < 0``), points level or up (``d_z <= 0``) or would go beyond ``max_range`` misses (NaN)."""
+    clearance = -level - o[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = np.where(clearance == 0.0, 0.0, clearance / d[:, 2])
+        hit = o + lam[:, None] * d
+    hit[:, 2] = -level  # exactly on the plane
+    missed = (clearance != 0.0) & ((clearance < 0.0) | (d[:, 2] <= 0.0) | (lam > max_range))
+    hit[missed] = np.nan
+    return hit
 
 
 def pixel_to_ground(

@@ -28,7 +28,7 @@ import numpy as np
 from fusion.unscented import unscented_transform
 from perception.camera import MERINO_IR_CAMERA, Intrinsics
 from perception.pose import CameraMount, CameraPose, Gimbal, camera_rotation
-from perception.projection import DEFAULT_MAX_RANGE, cast_ray, pixel_to_ray_world
+from perception.projection import DEFAULT_MAX_RANGE, cast_ray, cast_rays, pixel_to_ray_world
 from perception.rotations import rotation_from_euler
 from perception.terrain import FlatTerrain, Terrain
 
@@ -139,13 +139,8 @@ def geolocation_map(obs: Observation, terrain: Terrain, max_range: float = DEFAU
         centre = obs.position_ned + delta[:, :3] + R_nb @ obs.mount.offset
         centre[:, 2] += delta[:, 8]  # a terrain raised by δh == a camera lowered by δh
         d = (R @ obs.intrinsics.ray(obs.pixel + delta[:, 6:8])[..., None])[..., 0]
-        clearance = -terrain.level - centre[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lam = np.where((d[:, 2] > 0) & (clearance >= 0), clearance / d[:, 2], np.nan)
-        lam[lam > max_range] = np.nan
-        hit = centre + lam[:, None] * d
-        hit[:, 2] = -terrain.level - delta[:, 8]
-        hit[~np.isfinite(lam)] = np.nan
+        hit = cast_rays(terrain, centre, d, max_range)
+        hit[:, 2] -= delta[:, 8]
         return hit
 
     def generic(delta: np.ndarray) -> np.ndarray:
