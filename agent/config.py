@@ -24,7 +24,7 @@ from agent.sensors.registry import sensor_config_from_dict
 from tasking.registry import check_tasking
 
 #: Top-level keys that the world reads; the agent accepts and ignores them.
-WORLD_KEYS = frozenset({"targets", "radio", "description", "fire", "decoys"})
+WORLD_KEYS = frozenset({"targets", "radio", "description", "fire", "decoys", "references"})
 AGENT_KEYS = frozenset(
     {"name", "duration", "agents", "rate_hz", "altitude", "area", "origin", "terrain", "vehicle",
      "sensor", "tracking", "sending", "tasking", "seed", "radio_plan", "grid"}

@@ -20,6 +20,31 @@ SCENARIO_DIR = Path(__file__).with_name("scenarios")
 
 
 @dataclass(frozen=True)
+class References:
+    """``[references]``: which centralized filters the world runs beside the fleet (:mod:`mesh_sim.oracle`).
+
+    The oracle itself always runs: every run's RMSE ratio is to it. ``imm`` adds the consistent IMM
+    reference (``imm_targets``), ``in_flight`` the in-flight oracle — one centralized tracker per agent, so
+    N trackers in the world process, which on a small machine takes cores from the agents it measures.
+    Both are on by default; ``skymesh bench scale`` turns them off."""
+
+    imm: bool = True
+    in_flight: bool = True
+
+    @classmethod
+    def from_dict(cls, d) -> References:
+        if not isinstance(d, dict):
+            raise ValueError(f"[references] must be a table, got {d!r}")
+        unknown = set(d) - {"imm", "in_flight"}
+        if unknown:
+            raise ValueError(f"unknown references settings: {sorted(unknown)} (known: imm, in_flight)")
+        for key, value in d.items():
+            if not isinstance(value, bool):
+                raise ValueError(f"references.{key} must be true or false, got {value!r}")
+        return cls(**d)
+
+
+@dataclass(frozen=True)
 class Scenario:
     path: Path
     raw: dict
@@ -27,6 +52,7 @@ class Scenario:
     targets: list
     fire: FireConfig | None = None  # [fire]: the true fire (mesh_sim.fire); None: no fire
     decoys: tuple = ()  # (north, east, probability per frame) hot spots that are not fires
+    references: References = References()  # [references]: the centralized filters the world runs
 
     @property
     def name(self) -> str:
@@ -80,11 +106,12 @@ def load(name_or_path: str, **overrides) -> Scenario:
         targets = targets_from_config(raw.get("targets", []), terrain_from_config(agent.terrain))
         fire = FireConfig.from_dict(raw["fire"], agent.area.as_tuple()) if "fire" in raw else None
         decoys = parse_decoys(raw.get("decoys", []))
+        references = References.from_dict(raw.get("references", {}))
         if fire is not None and agent.grid is None:
             raise ValueError("[fire] needs a [grid] section: the agents map the fire with certainty grids")
     except (ValueError, TypeError, KeyError) as err:
         raise ValueError(f"{path}: {err}") from None
-    return Scenario(path, raw, agent, targets, fire, decoys)
+    return Scenario(path, raw, agent, targets, fire, decoys, references)
 
 
 def parse_decoys(entries) -> tuple[tuple[float, float, float], ...]:

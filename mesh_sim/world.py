@@ -41,8 +41,8 @@ class World:
         self.scenario = scenario
         self.transport = transport
         self.keys = keys
-        self.oracle = Oracle(scenario.agent, imm=True)
-        self.in_flight = InFlightOracle(scenario.agent)
+        self.oracle = Oracle(scenario.agent, imm=scenario.references.imm)
+        self.in_flight = InFlightOracle(scenario.agent) if scenario.references.in_flight else None
         self.seq = 0
         self.uavs: dict[str, list] = {}  # agent -> last reported position (the radio's range check uses it)
         self.now = 0.0
@@ -80,9 +80,11 @@ class World:
                     (self.grid_oracle.add_grid if env.kind == "grid" else self.grid_oracle.add_evidence)(env)
             else:
                 self.oracle.add(env, self.now)
-                self.in_flight.add(env, self.now)
+                if self.in_flight is not None:
+                    self.in_flight.add(env, self.now)
         self.oracle.evaluate(self.scenario.targets)
-        self.in_flight.evaluate(self.scenario.targets, self.now)
+        if self.in_flight is not None:
+            self.in_flight.evaluate(self.scenario.targets, self.now)
         if self.grid_oracle is not None:
             self.grid_oracle.evaluate(self.now)
 
@@ -104,9 +106,12 @@ class World:
             self.grid_oracle.save_maps(Path(folder) / "fire_maps.npz", self.fire.state_at(self.now), extent)
 
     def summary(self) -> dict:
-        out = {"targets": self.oracle.evaluator.summary(), "imm_targets": self.oracle.imm_evaluator.summary(),
-               "late_measurements": self.oracle.late,
-               "rejected": self.oracle.rejected, "in_flight": self.in_flight.summary()}
+        out = {"targets": self.oracle.evaluator.summary(), "late_measurements": self.oracle.late,
+               "rejected": self.oracle.rejected}
+        if self.oracle.imm is not None:
+            out["imm_targets"] = self.oracle.imm_evaluator.summary()
+        if self.in_flight is not None:
+            out["in_flight"] = self.in_flight.summary()
         if self.grid_oracle is not None:
             regions = [] if self.fire is None else self.fire.fire_regions(self.now)
             out["grid"] = {**self.grid_oracle.summary(regions, list(self.scenario.decoys)), "fire_regions": regions}

@@ -6,7 +6,8 @@ simulation seconds are wall seconds) for each sensor of ``SENSORS`` — the geom
 render, detect, bearings) — with its own sizes: N = 8, 16, 32, 40, 48 bearing agents and N = 4, 8, 16, 24
 camera agents (``--quick``: N = 2, 4 for each and shorter runs). ``--sensor bearing|camera`` measures one
 sensor only; ``--sizes 8,16,32`` replaces the sizes of every sensor measured. Every agent is its own OS
-process over the launcher's Zenoh router, plus the world process (truth and the centralized oracle). Full
+process over the launcher's Zenoh router, plus the world process (truth and the centralized oracle; its other
+references, the IMM and in-flight oracles, are off: ``REFERENCES``). Full
 mode stops growing N for a sensor once a size clearly fails (more than ``STOP_MISS_SHARE`` of the steps
 missed, or the run did not complete).
 
@@ -80,6 +81,10 @@ QUICK_DURATION_S = 5.0  # chosen here: a sensor's two quick runs, start-up and s
 MISS_GOAL = 0.01  # share of missed steps, below which a size "runs at the agent rate" (from the issue)
 STOP_MISS_SHARE = 0.20  # full mode stops growing N once a size misses more than this (chosen here)
 MEMORY_PROBE_AT = 0.8  # PSS/USS are read once, at this fraction of the simulated duration (chosen here)
+# The world runs only the oracle the RMSE ratio needs: the IMM reference and the in-flight oracle (one tracker
+# per agent) are instrumentation whose cost grows with N in the world process and would take the agents' cores
+# (measured with 16 agents: 0.4 of a core at 5 Hz). ``overrides={"references": ...}`` turns them back on.
+REFERENCES = {"imm": False, "in_flight": False}
 
 
 def run(
@@ -117,7 +122,7 @@ def run(
     if runs < 1:
         raise ValueError(f"repeats must be at least 1, got {repeats}")
     stop_early = (not quick) if stop_early is None else stop_early
-    overrides = dict(overrides or {})
+    overrides = {"references": REFERENCES, **(overrides or {})}
     if "sensor" in overrides:
         raise ValueError("choose the sensor with sensor= and its settings with sensor_settings=, not overrides")
     sensor_settings = dict(sensor_settings or {})
@@ -159,7 +164,7 @@ def run(
             "sensor_tables": tables, "sizes": {k: list(v) for k, v in plan.items()}, "measured_sizes": measured,
             "skipped_sizes": {k: [n for n in plan[k] if n not in measured[k]] for k in sensors},
             "duration_s": duration, "runs_per_size": runs, "speed": SPEED, "rate_hz": rate_hz, "miss_goal": MISS_GOAL,
-            "radio": base_scenario.raw.get("radio"),
+            "radio": base_scenario.raw.get("radio"), "references": base_scenario.raw.get("references"),
             "stop_miss_share": STOP_MISS_SHARE if stop_early else None,
             "startup": {"kind": "readiness handshake", "measured": "per agent, from its spawn to its ready file"},
             "load_average_before": list(load_before), "load_average_after": list(os.getloadavg()),

@@ -37,6 +37,7 @@ def test_scale_smallest_run_structure_and_cleanup(private_tmp, printed):
     assert settings["sensors"] == ["bearing", "camera"]
     assert settings["measured_sizes"] == {"bearing": [2], "camera": [2]}
     assert settings["sensor_tables"] == {"bearing": {"kind": "bearing", **wide}, "camera": {"kind": "camera"}}
+    assert settings["references"] == {"imm": False, "in_flight": False}  # the world runs the oracle only
     rows = {row["sensor"]: row for row in result["rows"]}
     assert list(rows) == ["bearing", "camera"]
     for sensor, row in rows.items():
