@@ -292,10 +292,32 @@ class Header:
     stamp: float
 
 
+class _Peek(msgspec.Struct):
+    """The header fields only: msgspec skips the rest (payload, acks, MAC) in C without building it."""
+
+    k: str
+    o: str
+    s: schemas.Seq
+    t: float
+
+
+_peek_decoder = msgspec.msgpack.Decoder(_Peek)
+
+
 def peek_header(data: bytes) -> Header | None:
     """Kind, origin, seq and stamp of an envelope without reading its payload, for the emulated radio
     (``None`` if unreadable; the header comes before the payload, so a cut payload does not matter).
-    Nothing is validated: :func:`decode` judges the same bytes afterwards."""
+    Nothing is validated: :func:`decode` judges the same bytes afterwards. A whole message is read by
+    msgspec, skipping everything but the header; one it cannot read (e.g. cut short) field by field."""
+    try:
+        head = _peek_decoder.decode(data)
+    except (msgspec.DecodeError, msgspec.ValidationError, ValueError):  # ValueError: e.g. a string not UTF-8
+        return _peek_fields(data)
+    return Header(head.k, head.o, head.s, head.t) if math.isfinite(head.t) else None
+
+
+def _peek_fields(data: bytes) -> Header | None:
+    """:func:`peek_header` by unpacking the map entry by entry up to the payload."""
     try:
         unpacker = msgpack.Unpacker(max_buffer_size=len(data) or 1, raw=False, strict_map_key=False)
         unpacker.feed(data)

@@ -5,6 +5,7 @@ message is admitted; a header that cannot be read is left to the agent's decoder
 
 from __future__ import annotations
 
+import msgpack
 import numpy as np
 
 from agent.net import wire
@@ -48,6 +49,26 @@ def test_peek_reads_the_header_of_a_real_envelope_and_nothing_of_garbage():
     assert peek_header(b"\xc1garbage") is None  # not msgpack
     assert peek_header(data[:5]) is None  # truncated before the sequence number
     assert peek_header(wire.encode(wire.Envelope(kind="track", origin="uav1", seq=1, stamp=0.0))[:-1]) is not None
+
+
+def test_the_fast_peek_reads_what_the_field_by_field_peek_reads():
+    """Oracle: the field-by-field unpacking (``wire._peek_fields``). Every prefix and 400 one-byte mutations of a
+    real flood message, plus headers of the wrong types (a bool seq, a negative seq, a string stamp, an infinite
+    stamp, no kind), get the same header, or None from both."""
+    data = wire.encode(wire.Envelope(kind="track", origin="uav1", seq=7, stamp=2.5, payload={
+        "increments": [["uav1", 3, np.ones((2, 9))]], "acks": {f"uav{i}": [5, 7] for i in range(8)}}))
+    rng = np.random.default_rng(0)
+    mutated = []
+    for _ in range(400):
+        b = bytearray(data)
+        b[rng.integers(len(b))] = rng.integers(256)
+        mutated.append(bytes(b))
+    odd = [msgpack.packb(m) for m in (
+        {"k": "track", "o": "uav1", "s": True, "t": 1.0}, {"k": "track", "o": "uav1", "s": -1, "t": 1.0},
+        {"k": "track", "o": "uav1", "s": 1, "t": "1.0"}, {"k": "track", "o": "uav1", "s": 1, "t": float("inf")},
+        {"o": "uav1", "s": 1, "t": 1.0}, {"k": "track", "o": "uav1", "s": 1, "t": 2}, [1, 2, 3])]
+    for case in [data[:n] for n in range(len(data) + 1)] + mutated + odd:
+        assert peek_header(case) == wire._peek_fields(case), case
 
 
 def test_decisions_equal_the_link_emulator_called_directly():
