@@ -25,7 +25,7 @@ from __future__ import annotations
 from agent.beliefs.bearing_codec import decode_bearings, encode_bearings
 from agent.beliefs.tracks import FUTURE_EPOCHS, TrackExchange
 from agent.net import wire
-from agent.net.flood_relay import FloodRelay, Held
+from agent.net.flood_relay import FloodRelay, acks_from_wire
 from agent.plugins import Observations, Outgoing
 from agent.sensors.bearing import Bearing
 from fusion.resync import Edge
@@ -87,7 +87,7 @@ class FloodExchange(TrackExchange):
             newest = max(self.tracker.model.epoch_of(b.t) for scan in scans for b in scan)
             self.too_old += sum(self.tracker.catch_up(scans, newest))
 
-    def _decode(self, payload: dict) -> tuple[list, dict[str, Held]]:
+    def _decode(self, payload: dict) -> tuple[list, dict[str, tuple[int, int]]]:
         """Everything checked before anything is applied: a bad message changes nothing. The wire's schema
         (:class:`agent.net.schemas.TrackPayload`) has fixed the types; here the fields of this policy must be
         there, the acknowledgement masks in range and the bearings well formed."""
@@ -95,7 +95,7 @@ class FloodExchange(TrackExchange):
         if not isinstance(increments, list) or not isinstance(acks, dict):
             raise wire.DecodeError("bad_field", "a flood message needs an increments list and an acks map")
         try:
-            held = {origin: Held.from_wire(entry) for origin, entry in acks.items()}
+            held = acks_from_wire(acks)
         except ValueError as err:
             raise wire.DecodeError("bad_field", f"acks: {err}") from None
         out = []

@@ -32,8 +32,21 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
+import msgspec
+
+from agent.net.schemas import HeldWire
+
 ACK_SPAN = 64  # increments acknowledged below the highest one, per origin; chosen here (>> a window)
 _MASK_LIMIT = 1 << ACK_SPAN
+
+
+def holds(high: int, mask: int, n: int) -> bool:
+    """Is increment ``n`` among those acknowledged by ``[high, mask]`` (:class:`Held`)?"""
+    if n > high:
+        return False
+    if n == high or high - 1 - n >= ACK_SPAN:
+        return True
+    return bool(mask >> (high - 1 - n) & 1)
 
 
 class Held:
@@ -56,26 +69,27 @@ class Held:
         return True
 
     def has(self, n: int) -> bool:
-        if n > self.high:
-            return False
-        if n == self.high or self.high - 1 - n >= ACK_SPAN:
-            return True
-        return bool(self.mask >> (self.high - 1 - n) & 1)
+        return holds(self.high, self.mask, n)
 
     def wire(self) -> list[int]:
         return [self.high, self.mask]
 
-    @classmethod
-    def from_wire(cls, entry) -> Held:
-        """From ``[high, mask]`` as sent; ``ValueError`` if it is not two integers in range."""
-        if type(entry) not in (list, tuple) or len(entry) != 2:  # on every entry of every message: no isinstance
-            raise ValueError("an acknowledgement must be [highest, mask]")
-        high, mask = entry
-        if type(high) is not int or type(mask) is not int:  # not bool either
-            raise ValueError("an acknowledgement holds two integers")
-        if high < -1 or not 0 <= mask < _MASK_LIMIT:
-            raise ValueError(f"acknowledgement out of range: highest {high}, mask {mask}")
-        return cls(high, mask)
+
+_ACKS = dict[str, HeldWire]
+
+
+def acks_from_wire(acks) -> dict[str, tuple[int, int]]:
+    """A message's acknowledgements, ``{origin: [highest, mask]}``, checked in C (msgspec, against the wire's
+    :data:`agent.net.schemas.HeldWire`) and kept as ``(highest, mask)`` pairs: on every message of every
+    step, N of them, so no object per entry. ``ValueError`` naming the fault if it is not a map of origin
+    names to two integers in range (``highest >= -1``, ``0 <= mask < 2^ACK_SPAN``)."""
+    try:
+        pairs = msgspec.convert(acks, _ACKS)
+    except msgspec.ValidationError as err:
+        raise ValueError(f"an acknowledgement must be [highest >= -1, mask >= 0]: {err}") from None
+    if pairs and max(mask for _, mask in pairs.values()) >= _MASK_LIMIT:
+        raise ValueError(f"an acknowledgement mask must be below 2^{ACK_SPAN}")
+    return pairs
 
 
 @dataclass
@@ -105,7 +119,7 @@ class FloodRelay:
         self._count = 0
         self._held: dict[tuple[str, int], Increment] = {}
         self._mine: dict[str, Held] = {}  # origin -> what this agent holds
-        self._theirs: dict[str, dict[str, Held]] = {}  # neighbour -> origin -> what it acknowledged
+        self._theirs: dict[str, dict[str, tuple[int, int]]] = {}  # neighbour -> origin -> (highest, mask) it acked
         self._acks_sent: dict | None = None
         self.relayed = 0  # increments broadcast that originated elsewhere
         self.retransmitted = 0  # broadcasts of an increment after its first
@@ -132,8 +146,9 @@ class FloodRelay:
         self._held[key] = Increment(origin, n, t, data, sender, now, holders={sender})
         return True
 
-    def learn(self, sender: str, acks: dict[str, Held]) -> None:
-        """The acknowledgements in ``sender``'s latest message (they supersede its earlier ones)."""
+    def learn(self, sender: str, acks: dict[str, tuple[int, int]]) -> None:
+        """The acknowledgements in ``sender``'s latest message, as :func:`acks_from_wire` gives them (they
+        supersede its earlier ones)."""
         self._theirs[sender] = acks
 
     # -- out --------------------------------------------------------------------------------------
@@ -141,7 +156,7 @@ class FloodRelay:
         if neighbour == inc.origin or neighbour in inc.holders:
             return True
         held = self._theirs.get(neighbour, {}).get(inc.origin)
-        return held is not None and held.has(inc.n)
+        return held is not None and holds(held[0], held[1], inc.n)
 
     def due(self, now: float, neighbours: Iterable[str],
             neighbours_of: Callable[[str], frozenset[str]]) -> list[Increment]:
