@@ -28,10 +28,10 @@ def decode_bearings(rows) -> list[Bearing]:
         raise DecodeError("bad_field", f"bearings must be a (k, {COLUMNS}) float64 array")
     if not 1 <= rows.shape[0] <= MAX_ROWS:
         raise DecodeError("bad_field", f"a batch holds 1 to {MAX_ROWS} bearings, got {rows.shape[0]}")
-    if not np.all(np.isfinite(rows)):
+    if not np.isfinite(rows).all():
         raise DecodeError("bad_field", "bearings must be finite")
-    r_aa, r_ae, r_ee = rows[:, 6], rows[:, 7], rows[:, 8]
-    if np.any(r_aa <= 0) or np.any(r_aa * r_ee - r_ae**2 <= 0):
+    table = rows.tolist()  # a batch holds a few rows and comes with every message: plain floats beat ufuncs here
+    if not all(r[6] > 0 and r[6] * r[8] - r[7] * r[7] > 0 for r in table):
         raise DecodeError("bad_field", "a bearing covariance is not positive definite")
-    return [Bearing(float(r[0]), r[1:4].copy(), r[4:6].copy(), np.array([[r[6], r[7]], [r[7], r[8]]]))
-            for r in rows]
+    return [Bearing(r[0], np.array(r[1:4]), np.array(r[4:6]), np.array([[r[6], r[7]], [r[7], r[8]]]))
+            for r in table]
