@@ -50,10 +50,16 @@ class Topology:
         self._sent_mine: list[str] | None = None  # our neighbours in our last message, and when we sent it
         self._sent_at = -float("inf")
         self._cache: tuple[frozenset, frozenset] | None = None  # (known graph, its bridges): graphs change rarely
-        self._memo: tuple | None = None  # ((t, version, our neighbours), bridges or None when incomplete)
+        self._memo: tuple | None = None  # ((t, version), bridges or None when incomplete): see edge
 
     def heard(self, peer: str, t: float) -> None:
-        self._heard[peer] = max(t, self._heard.get(peer, t))
+        old = self._heard.get(peer)
+        new = t if old is None else max(t, old)
+        self._heard[peer] = new
+        if self._memo is not None and new != old:  # does this change our neighbours at the memo's time?
+            at = self._memo[0][0]
+            if old is None or (at - old <= self.timeout) != (at - new <= self.timeout):
+                self._memo = None
 
     def neighbours(self, t: float) -> list[str]:
         return sorted(p for p, last in self._heard.items() if t - last <= self.timeout)
@@ -100,11 +106,11 @@ class Topology:
     def edge(self, peer: str, t: float) -> Edge:
         """What ``(me, peer)`` is in the graph known at ``t``: ``TREE`` (a bridge) or ``LOOP`` when that knowledge
         is complete, ``UNKNOWN`` when it is not. Computed once per step and state of knowledge (every message
-        received in a step asks)."""
-        mine = frozenset(self.neighbours(t))
-        key = (t, self._version, mine)
+        received in a step asks): the memo holds for its time and graph version until :meth:`heard` changes
+        who our neighbours are at that time."""
+        key = (t, self._version)
         if self._memo is None or self._memo[0] != key:
-            self._memo = (key, self._bridges(t, mine))
+            self._memo = (key, self._bridges(t, frozenset(self.neighbours(t))))
         found = self._memo[1]
         if found is None:
             return Edge.UNKNOWN

@@ -101,6 +101,25 @@ def test_edge_matches_brute_force_bridges(first, second):
     assert {p: topo.edge(p, 20.0) for p in expected} == expected
 
 
+@settings(max_examples=400, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(["heard", "edge", "report"]), st.sampled_from(["b", "c", "d"]),
+                          st.integers(0, 16).map(lambda k: k / 2)), max_size=60))
+def test_the_edge_memo_answers_as_a_fresh_computation_would(calls):
+    """Interleaved, out-of-order ``heard`` and ``edge`` calls and topology reports: every answer equals that of a
+    new object given the same state (no memo). A peer heard again can join or leave our neighbours at the memo's
+    time only through ``heard``, which must drop the memo then."""
+    topo = Topology(ME, timeout=3.0)
+    for what, peer, t in calls:
+        if what == "heard":
+            topo.heard(peer, t)
+        elif what == "report":
+            tell(topo, {peer: [t, [ME]]})  # a star around us: complete knowledge makes every link a tree edge
+        else:
+            fresh = Topology(ME, timeout=3.0)
+            fresh._heard, fresh._reports = dict(topo._heard), dict(topo._reports)
+            assert topo.edge(peer, t) == fresh.edge(peer, t), (peer, t)
+
+
 def test_line_tree_edges_and_a_loop_removes_them():
     # a0 - a1 - a2: every edge is a bridge
     topo = topology_from({"a1": [ME, "a2"], "a2": ["a1"]}, ["a1"], 0.0)
