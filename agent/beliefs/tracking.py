@@ -55,6 +55,7 @@ from scipy.optimize import linear_sum_assignment
 from agent.beliefs.particle_init import ParticleInitiator
 from agent.beliefs.tracking_config import TrackerConfig
 from agent.sensors.bearing import Bearing
+from fusion import lapack
 from fusion.channel_filter import ChannelFilter, Received
 from fusion.gaussian import Gaussian, UninformativeBeliefError
 from fusion.imm_window import ImmWindow, ImmWindowModel
@@ -126,7 +127,8 @@ class Tracker:
         self._next_id = 0
         self._held: dict[int, list[tuple[Bearing, int]]] = {}  # track id -> (bearing, offset): see _add_held
         self._predicted: dict[int, Trajectory | ImmWindow] = {}  # track id -> its belief at this epoch's start
-        self._gated: dict[tuple[int, int], float] = {}  # (id(bearing), track id) -> d^2, for one update
+        self._gated: dict[int, dict[int, float]] = {}  # id(bearing) -> {track id: d^2}, for one update
+        self._priors: dict[tuple[int, int], tuple | None] = {}  # (track id, offset) -> predicted position, one update
 
     # -- time -----------------------------------------------------------------------------------
     def advance(self, epoch: int) -> None:
@@ -149,7 +151,10 @@ class Tracker:
             cov = track.estimate().cov
         except UninformativeBeliefError:
             return True
-        return float(np.sqrt(np.max(np.linalg.eigvalsh(cov[:3, :3])))) > self.config.max_position_std
+        # the largest position standard deviation is at most s exactly when s^2 I - P_pos is positive
+        # (semi)definite: one Cholesky factorisation instead of an eigendecomposition
+        margin = self.config.max_position_std**2 * np.eye(3) - cov[:3, :3]
+        return lapack.cholesky(margin) is None
 
     def _delete(self, track_id: int) -> None:
         del self.tracks[track_id]
@@ -168,7 +173,7 @@ class Tracker:
         predictions (:meth:`_prediction`), so the distances of every scan against the tracks that exist at
         the start are computed together, in one vectorised call. Returns counts of what happened."""
         counts = {"updated": 0, "initiated": 0, "unused": 0} | ({} if self.initiator is None else {"candidate": 0})
-        self._gated = {}
+        self._gated, self._priors = {}, {}
         if not by_label:
             self._distances([b for scan in scans for b in scan])
         for bearings in scans:
@@ -336,58 +341,72 @@ class Tracker:
             raise ValueError(f"bearing at t={bearing.t} is outside the window ending at epoch {self.epoch}")
         return offset
 
-    def _distances(self, bearings: list[Bearing]) -> tuple[list[int], np.ndarray]:
+    def _distances(self, bearings: list[Bearing]) -> tuple[list[int], list[list[float]]]:
         """Merino (3.64) of every bearing against every track's predicted state at the bearing's time (a peer's
-        bearing may be older; :meth:`_prediction`): the track ids and an ``(m, tracks)`` cost matrix,
+        bearing may be older; :meth:`_prediction`): the track ids and the ``(m, tracks)`` costs, row by row,
         ``_UNASSIGNED`` where a distance does not exist (the state is not observable, the bearing is outside
         the window or undefined there). Pairs are kept for the rest of the update: each is computed once, and
         those missing are computed together (:func:`fusion.measurement.bearing_gate_distances`)."""
         ids = list(self.tracks)
-        missing = [b for b in bearings if any((id(b), t) not in self._gated for t in ids)]
-        if missing and ids:
-            self._gate(missing, ids)
-        cost = np.array([[self._gated[(id(b), t)] for t in ids] for b in bearings]).reshape(len(bearings), len(ids))
-        return ids, cost
+        known = [self._gated.setdefault(id(b), {}) for b in bearings]
+        missing = {t for got in known for t in ids if t not in got}
+        if missing:
+            self._gate(bearings, [t for t in ids if t in missing])
+        return ids, [[got[t] for t in ids] for got in known]
 
     def _gate(self, bearings: list[Bearing], ids: list[int]) -> None:
-        """Fill ``_gated`` for every pair of ``bearings`` and tracks ``ids``, one vectorised call per state offset."""
+        """Fill ``_gated`` for every pair of ``bearings`` and tracks ``ids``, one vectorised call per state offset,
+        against the tracks' predicted positions (:meth:`_position_prior`)."""
         by_offset: dict[int, list[Bearing]] = {}
         for b in bearings:
             try:
                 by_offset.setdefault(self._offset(b), []).append(b)
             except ValueError:  # outside the window: no distance to anything
-                self._gated.update({(id(b), t): _UNASSIGNED for t in ids})
+                self._gated[id(b)].update(dict.fromkeys(ids, _UNASSIGNED))
         for offset, rows in by_offset.items():
-            tracks, means, covs = [], [], []
-            for t in ids:
-                try:
-                    est = self._prediction(self.tracks[t], offset)
-                    means.append(est.mean[:3])
-                    covs.append(est.cov[:3, :3])
-                    tracks.append(t)
-                except (UninformativeBeliefError, ValueError):
-                    self._gated.update({(id(b), t): _UNASSIGNED for b in rows})
+            priors = [(t, self._position_prior(t, offset)) for t in ids]
+            tracks = [t for t, prior in priors if prior is not None]
+            for b in rows:
+                self._gated[id(b)].update({t: _UNASSIGNED for t, prior in priors if prior is None})
             if not tracks:
                 continue
+            means = np.array([prior[0] for _, prior in priors if prior is not None])
+            covs = np.array([prior[1] for _, prior in priors if prior is not None])
             d2 = bearing_gate_distances(np.array([b.sensor for b in rows]), np.array([b.azel for b in rows]),
-                                        np.array([b.R for b in rows]), np.array(means), np.array(covs))
+                                        np.array([b.R for b in rows]), means, covs)
             d2 = np.where(np.isfinite(d2), d2, _UNASSIGNED).tolist()
-            for i, b in enumerate(rows):
-                self._gated.update({(id(b), t): d2[i][j] for j, t in enumerate(tracks)})
+            for b, row in zip(rows, d2, strict=True):
+                self._gated[id(b)].update(zip(tracks, row, strict=True))
+
+    def _position_prior(self, track_id: int, offset: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The predicted position (mean, 3x3 covariance) of a track ``offset`` steps back (:meth:`_prediction`),
+        computed once per update; ``None`` when the state is not observable there."""
+        key = (track_id, offset)
+        if key not in self._priors:
+            try:
+                est = self._prediction(self.tracks[track_id], offset)
+                self._priors[key] = (est.mean[:3], est.cov[:3, :3])
+            except (UninformativeBeliefError, ValueError):
+                self._priors[key] = None
+        return self._priors[key]
 
     def _pairs_by_distance(self, bearings: list[Bearing]) -> list[tuple[int, int]]:
+        """One detection per track (Hungarian on the gated ``d^2``; for a single detection, the smallest)."""
         if not bearings or not self.tracks:
             return []
         ids, cost = self._distances(bearings)
-        gated = np.where(cost <= self.config.gate, cost, _UNASSIGNED)
+        gate = self.config.gate
         # Confirmed tracks have the first claim on the detections in their gates: a tentative track started
         # by one of the ~1 % of a target's detections that fall outside its gate is broad (small d^2), so
         # otherwise it takes the target's next detections, gets confirmed and stays a duplicate.
-        tentative = np.array([not self.tracks[i].confirmed for i in ids])
-        gated[:, tentative] = np.where(gated[:, tentative] < _UNASSIGNED, gated[:, tentative] + self.config.gate,
-                                       _UNASSIGNED)
-        rows, cols = linear_sum_assignment(gated)
-        return [(int(r), ids[c]) for r, c in zip(rows, cols, strict=True) if gated[r, c] < _UNASSIGNED]
+        claim = [0.0 if self.tracks[i].confirmed else gate for i in ids]
+        gated = [[c + extra if c <= gate else _UNASSIGNED for c, extra in zip(row, claim, strict=True)]
+                 for row in cost]
+        if len(bearings) == 1:
+            best = min(range(len(ids)), key=gated[0].__getitem__)
+            return [(0, ids[best])] if gated[0][best] < _UNASSIGNED else []
+        rows, cols = linear_sum_assignment(np.array(gated))
+        return [(int(r), ids[c]) for r, c in zip(rows, cols, strict=True) if gated[r][c] < _UNASSIGNED]
 
     def _pairs_by_label(self, bearings: list[Bearing]) -> list[tuple[int, int]]:
         by_truth = {t.truth_id: t.id for t in self.tracks.values() if t.truth_id is not None}
@@ -395,7 +414,7 @@ class Tracker:
 
     def _inside_any_gate(self, bearing: Bearing) -> bool:
         _, cost = self._distances([bearing])
-        return bool(np.any(cost <= self.config.gate))
+        return any(c <= self.config.gate for c in cost[0])
 
     def _initiate(self, bearing: Bearing) -> Track | None:
         """A new track at the ground point of the ray, with its unscented-transform covariance."""

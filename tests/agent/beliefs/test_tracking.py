@@ -108,7 +108,7 @@ class RecordingTracker(Tracker):
     def _pairs_by_distance(self, bearings):
         pairs = super()._pairs_by_distance(bearings)
         if bearings and self.tracks:
-            _, cost = self._distances(bearings)
+            cost = np.array(self._distances(bearings)[1])
             labels = [(bearings[i].truth_id, track_id) for i, track_id in pairs]
             self.scans.append((self.epoch, labels, cost))
         return pairs
@@ -631,3 +631,23 @@ def test_a_steps_scans_applied_together_equal_one_update_per_scan(monkeypatch):
     for (_, g), (_, e) in zip(got, expected, strict=True):
         np.testing.assert_allclose(g.mean, e.mean, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(g.cov, e.cov, rtol=1e-9, atol=1e-12)
+
+
+def test_a_track_too_uncertain_is_deleted_exactly_when_its_largest_position_std_passes_the_limit():
+    """Oracle: the eigenvalues of the position covariance (numpy). Tracks started from position measurements of
+    random orientation and size, their largest standard deviation within ±10 % of ``max_position_std`` after the
+    prediction: the tracker deletes exactly those beyond it."""
+    config = TrackerConfig(max_position_std=40.0, confirm_within=100, stale_after=1e9)
+    rng = np.random.default_rng(5)
+    outcomes = set()
+    for _ in range(40):
+        tracker = Tracker(config, 0.2, FlatTerrain(0.0))
+        Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        cov = Q @ np.diag([rng.uniform(1, 30) ** 2, rng.uniform(1, 30) ** 2, (40.0 * rng.uniform(0.9, 1.1)) ** 2]) @ Q.T
+        track = tracker._start_track(np.zeros(3), cov, 0, None, 0.0)
+        std = float(np.sqrt(np.linalg.eigvalsh(track.estimate().cov[:3, :3]).max()))
+        if abs(std - 40.0) < 1e-6:
+            continue
+        outcomes.add(std > 40.0)
+        assert tracker._expired(track) == (std > 40.0), std
+    assert outcomes == {True, False}  # both sides of the limit were tried
