@@ -31,17 +31,21 @@ class InMemoryBus:
 
     def __init__(self):
         self._endpoints: list[BusEndpoint] = []
+        self._routes: dict[str, list[BusEndpoint]] = {}  # key -> the endpoints subscribed to it (keys repeat)
 
     def endpoint(self, name: str, subscribe: list[str]) -> BusEndpoint:
         ep = BusEndpoint(self, name, list(subscribe))
         self._endpoints.append(ep)
+        self._routes.clear()
         return ep
 
     def deliver(self, sender: str, key: str, data: bytes) -> None:
         now = time.time()
-        for ep in self._endpoints:
-            if any(key_matches(p, key) for p in ep.subscribe):
-                ep.inbox.append(Incoming(key, data, now))
+        route = self._routes.get(key)
+        if route is None:
+            route = self._routes[key] = [ep for ep in self._endpoints if any(key_matches(p, key) for p in ep.subscribe)]
+        for ep in route:
+            ep.inbox.append(Incoming(key, data, now))
 
 
 class BusEndpoint:

@@ -104,7 +104,7 @@ class Increment:
     source: str
     arrived: float
     last_sent: float | None = None
-    holders: set[str] = field(default_factory=set)  # neighbours known to hold it (they sent it to us)
+    holders: set[str] = field(default_factory=set)  # neighbours known to hold it (they sent or acknowledged it)
     settled: frozenset[str] | None = None  # a neighbour set that was found to hold it all (holding only grows)
 
 
@@ -168,7 +168,9 @@ class FloodRelay:
         for inc in self._held.values():
             if inc.settled == everyone:  # every current neighbour holds it: nothing to check (O(1) per step)
                 continue
-            missing = [p for p in neighbours if not self._holds(p, inc)]
+            unknown = everyone.difference(inc.holders)
+            missing = [p for p in neighbours if p in unknown and not self._holds(p, inc)]
+            inc.holders.update(unknown.difference(missing))  # found to hold it by their acks: holding only grows
             if not missing:
                 inc.settled = everyone
                 continue
