@@ -30,7 +30,10 @@ The degradation is drawn once per frame and applied to every part. A frame with 
 and returned as its :class:`~perception.scene.RenderedFrame`: bands tear rows sideways across the whole width,
 a failed link replaces the whole picture, and the banding and blank-frame checks of the detectors must see it
 (at ``banding_prob`` p a camera pays the full price in a fraction p of its frames). So is every frame of a camera
-no larger than the preview (``s = 1``): its preview would be the frame itself.
+no larger than the preview (``s = 1``): its preview would be the frame itself. The random numbers are drawn as
+render_frame draws them (the speckles, the banding decision, one place in the noise banks for all parts), so what
+a caller draws from the same generator — the camera sensor's telemetry noise — is the same whichever way its
+frames are drawn (up to the first banding episode).
 
 What a ROI frame does not show: whatever a detector would find in the ground texture alone, away from targets
 and speckles (over the tiled floor from 80 m the dark-blob detector finds ~4 such blobs a frame in the whole
@@ -184,12 +187,8 @@ def render_roi(
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     deg = Degradation() if degradation is None else degradation
     s = preview_scale(width, height)
-    whole = None
-    if s == 1.0 or deg.failed is not None:  # no larger than its preview, or a failed link: as render_frame draws it
-        whole = deg
-    elif banding_episode(deg, rng):  # this frame has its banding episode
-        whole = replace(deg, banding_prob=1.0)
-    if whole is not None:
+
+    def drawn_whole(degradation: Degradation) -> RenderedFrame:
         return render_frame(
             view,
             width,
@@ -198,16 +197,25 @@ def render_roi(
             ground=ground,
             ground_height=ground_height,
             terrain=terrain,
-            degradation=whole,
+            degradation=degradation,
             seed=rng,
             thermal=False,
         )
+
+    if s == 1.0 or deg.failed is not None:  # no larger than its preview, or a failed link: as render_frame draws it
+        return drawn_whole(deg)
+    # Random draws in render_frame's order (speckles, banding, noise), so that what a caller draws from the same
+    # generator comes out as with whole frames (until a banding episode, which render_frame draws again).
+    speckles = plan_speckles(deg, width, height, rng) if deg.speckle_rate > 0 else []
+    if banding_episode(deg, rng):
+        return drawn_whole(replace(deg, banding_prob=1.0))
+    at = noise_offset(rng) if deg.noise_sigma > 0 else (0, 0)  # the frame's place in the noise banks
     objects = [
         (k, index, target, shape)
         for k, (target, index) in enumerate(painter_order(view, targets), start=1)
         if (shape := project_object(view, target)) is not None
     ]
-    scene = _Scene(objects, plan_speckles(deg, width, height, rng))
+    scene = _Scene(objects, speckles)
     offset = (0.5 - 0.5 * s, 0.5 - 0.5 * s)
     size = (round(width * s), round(height * s))
     step = round(1.0 / s)
@@ -216,10 +224,9 @@ def render_roi(
         frame_ground.layer(_pixel_map(s, offset), size, downsample=step), (0, 0, width, height), s, offset
     )
     if deg.noise_sigma > 0:
-        add_rgb_noise(preview, deg.noise_sigma, size, noise_offset(rng), average=step)
+        add_rgb_noise(preview, deg.noise_sigma, size, at, average=step)
     aligned = step * s == 1.0 and width % step == 0 and height % step == 0  # windows cover whole preview pixels
     extents = [shape.box for *_, shape in objects] + [speckle.box for speckle in scene.speckles]
-    at = noise_offset(rng)
     windows = []
     for x0, y0, x1, y1 in window_boxes(extents, width, height, grid=step if aligned else 1):
         image = scene.paint(

@@ -205,8 +205,7 @@ def camera_jobs(width: int, height: int) -> dict[str, Callable[[], object]]:
         """The frame the camera hands its detector: the whole RGB image, or a RoiFrame."""
         if render == "roi":
             frame = render_roi(camera, width, height, targets, ground=ground, seed=1)
-            if isinstance(frame, RoiFrame):
-                return frame
+            return frame if isinstance(frame, RoiFrame) else frame.rgb
         return render_frame(camera, width, height, targets, ground=ground, seed=1, thermal=False).rgb
 
     truth = [{"id": f"t{k}", "position": np.array([n, e, 0.0])} for k, (n, e) in enumerate(CAMERA_TARGETS_NE)]

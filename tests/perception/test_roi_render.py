@@ -122,3 +122,21 @@ def test_the_video_quality_of_the_preview_is_that_of_the_whole_frame(ground):
         roi.update(render_roi(cam, 640, 480, TARGETS, ground=ground, seed=k).preview)
     assert roi.D == pytest.approx(full.D, rel=0.2)
     assert roi.D < roi.good_level
+
+
+@pytest.mark.parametrize("degradation", [Degradation(), Degradation(noise_sigma=0.0), Degradation(speckle_rate=3.0)])
+def test_a_frame_drawn_in_parts_takes_the_random_draws_of_a_whole_frame(degradation):
+    """What else a camera draws from its generator (its telemetry's noise) does not depend on how it draws frames."""
+    def whole(rng):
+        return render_frame(camera(), 640, 480, TARGETS, degradation=degradation, seed=rng, thermal=False)
+
+    def in_parts(rng):
+        return render_roi(camera(), 640, 480, TARGETS, degradation=degradation, seed=rng)
+
+    after = []
+    for draw in (whole, in_parts):
+        rng = np.random.default_rng(11)
+        for _ in range(3):
+            draw(rng)
+        after.append(rng.random())
+    assert after[0] == after[1]
