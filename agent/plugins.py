@@ -39,7 +39,7 @@ class Transport(Protocol):
     """Bytes on keys (DESIGN.md §5): :class:`agent.net.zenoh_transport.ZenohTransport`,
     :class:`agent.net.bus.BusEndpoint`, or either inside :class:`agent.net.radio.RadioTransport`."""
 
-    dropped: int  # received samples dropped because the agent fell behind
+    dropped: int  # times received samples may have been lost because the agent fell behind (see each transport)
 
     def publish(self, key: str, data: bytes) -> None: ...
 

@@ -9,9 +9,14 @@ By default a process connects as a Zenoh *client* to a router on loopback with m
 real hardware a standard Zenoh JSON5 file is given instead (``--zenoh-config``), e.g. connecting to
 ``zenohd`` routers across machines.
 
-Received samples are queued by Zenoh's callback thread and drained by the agent loop, so that fusion
-never runs concurrently with itself. The queue is bounded: when the loop falls behind, the oldest
-samples are dropped and counted (a slow agent must not grow without bound).
+Received samples wait in one bounded Zenoh ``RingChannel`` per subscription and are pulled by the agent
+loop's ``drain`` (``try_recv`` until empty), so that fusion never runs concurrently with itself and no
+Python callback thread competes with the loop for the GIL (``../shared/specs/dependencies.md`` §2.2: a
+callback waits up to a switch interval whenever the loop runs Python, and a slow callback leaves stale data
+in the socket buffers). A ring keeps the newest ``queue_limit`` samples: when the loop falls that far
+behind, the oldest are overwritten (a slow agent must not grow without bound). Zenoh does not say how many;
+``dropped`` counts the drains that pulled a full ring's worth from one subscription, where the oldest may
+have been overwritten.
 """
 
 from __future__ import annotations
@@ -19,13 +24,12 @@ from __future__ import annotations
 import json
 import threading
 import time
-from collections import deque
 
 import zenoh
 
 from agent.net.keys import Incoming, Keys
 
-QUEUE_LIMIT = 10_000  # samples; chosen here (a 32-agent fleet at 5 Hz produces ~300 per second)
+QUEUE_LIMIT = 10_000  # samples per subscription; chosen here (40 agents at 5 Hz send an agent ~300 per second)
 
 
 def client_config(connect: list[str], lease_ms: int | None = None) -> zenoh.Config:
@@ -63,16 +67,20 @@ def load_config(connect: list[str] | None, config_file: str | None) -> zenoh.Con
 class ZenohTransport:
     """Publish bytes on keys, queue what arrives on subscribed keys, track who is alive."""
 
-    def __init__(self, name: str, keys: Keys, config: zenoh.Config, subscribe: list[str], liveliness: bool = True):
+    def __init__(self, name: str, keys: Keys, config: zenoh.Config, subscribe: list[str], liveliness: bool = True,
+                 queue_limit: int = QUEUE_LIMIT):
+        if queue_limit < 1:
+            raise ValueError(f"queue_limit must be at least 1, got {queue_limit}")
         zenoh.init_log_from_env_or("error")
         self.name = name
         self.keys = keys
         self.session = zenoh.open(config)
-        self._queue: deque[Incoming] = deque()
-        self._lock = threading.Lock()
-        self.dropped = 0
+        self._lock = threading.Lock()  # the liveliness callback's set
+        self.dropped = 0  # drains that pulled a full ring from one subscription (its oldest may have been lost)
+        self._limit = queue_limit
         self._publishers: dict[str, zenoh.Publisher] = {}
-        self._subscribers = [self.session.declare_subscriber(k, self._on_sample) for k in subscribe]
+        self._subscribers = [self.session.declare_subscriber(k, zenoh.handlers.RingChannel(queue_limit))
+                             for k in subscribe]
         self._alive: set[str] = set()
         self._token = None
         self._liveliness_sub = None
@@ -81,14 +89,6 @@ class ZenohTransport:
             self._liveliness_sub = self.session.liveliness().declare_subscriber(
                 keys.alive("*"), self._on_liveliness, history=True
             )
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        item = Incoming(str(sample.key_expr), sample.payload.to_bytes(), time.time())
-        with self._lock:
-            if len(self._queue) >= QUEUE_LIMIT:
-                self._queue.popleft()
-                self.dropped += 1
-            self._queue.append(item)
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         agent = str(sample.key_expr).rsplit("/", 1)[-1]
@@ -105,9 +105,15 @@ class ZenohTransport:
         pub.put(data)
 
     def drain(self) -> list[Incoming]:
-        with self._lock:
-            items = list(self._queue)
-            self._queue.clear()
+        """Everything received since the last drain, subscription by subscription, oldest first in each."""
+        now = time.time()
+        items: list[Incoming] = []
+        for sub in self._subscribers:
+            start = len(items)
+            while (sample := sub.try_recv()) is not None:
+                items.append(Incoming(str(sample.key_expr), sample.payload.to_bytes(), now))
+            if len(items) - start >= self._limit:
+                self.dropped += 1
         return items
 
     def alive(self) -> set[str]:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -13,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import zenoh
 from rerun.chunk import RrdReader
 
 from agent.net import wire
 from agent.net.keys import Incoming, Keys
-from agent.net.zenoh_transport import ZenohTransport, client_config, router_config
+from agent.net.zenoh_transport import ZenohTransport, client_config
 from fusion.measurement import azel_to_los
+from mesh_sim.launcher import free_port
 from mesh_sim.observer import Observer
 from mesh_sim.observer_geometry import cov_to_ellipsoid, quat_xyzw_to_matrix, ray_end
 
@@ -70,12 +69,6 @@ def _read_rrd(path) -> tuple[dict[str, int], dict[str, object]]:
         rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
         last[chunk.entity_path] = chunk.to_record_batch()
     return rows, last
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _gone(pid: int) -> bool:
@@ -215,17 +208,6 @@ def test_path_is_bounded():
 
 
 # -- as a process over Zenoh -------------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def router():
-    port = _free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    session = zenoh.open(router_config([endpoint]))
-    try:
-        yield endpoint
-    finally:
-        session.close()
-
-
 def _observer_cmd(fleet: str, endpoint: str, rrd: Path, duration: float) -> list[str]:
     return [sys.executable, "-m", "mesh_sim.observer", "--fleet", fleet, "--connect", endpoint, "--save", str(rrd),
             "--duration", str(duration)]
@@ -241,13 +223,13 @@ def _wait_for_subscriber(session, key: str, timeout: float = 15.0):
 
 
 @pytest.mark.slow
-def test_observer_process_over_zenoh_stops_on_sigterm(router, tmp_path):
+def test_observer_process_over_zenoh_stops_on_sigterm(zenoh_router, tmp_path):
     fleet = f"t{uuid.uuid4().hex[:12]}"
     keys = Keys(fleet)
     rrd = tmp_path / "fleet.rrd"
     log_file = open(tmp_path / "observer.log", "w")  # closed in the finally below
-    proc = subprocess.Popen(_observer_cmd(fleet, router, rrd, 30.0), cwd=REPO, stdout=log_file, stderr=log_file)
-    client = ZenohTransport("tester", keys, client_config([router]), subscribe=[], liveliness=False)
+    proc = subprocess.Popen(_observer_cmd(fleet, zenoh_router, rrd, 30.0), cwd=REPO, stdout=log_file, stderr=log_file)
+    client = ZenohTransport("tester", keys, client_config([zenoh_router]), subscribe=[], liveliness=False)
     try:
         _wait_for_subscriber(client.session, keys.telemetry("uav0")).undeclare()
         start, k = time.monotonic(), 0
@@ -279,13 +261,13 @@ def test_observer_process_over_zenoh_stops_on_sigterm(router, tmp_path):
 
 
 @pytest.mark.slow
-def test_observer_process_exits_when_its_parent_dies(router, tmp_path):
+def test_observer_process_exits_when_its_parent_dies(zenoh_router, tmp_path):
     fleet = f"t{uuid.uuid4().hex[:12]}"
     rrd = tmp_path / "orphan.rrd"
     # a parent that starts the observer, reports its pid and dies after a second
     parent_code = (
         "import os, subprocess, sys, time\n"
-        f"p = subprocess.Popen({_observer_cmd(fleet, router, rrd, 60.0)!r} + ['--parent-pid', str(os.getpid())], "
+        f"p = subprocess.Popen({_observer_cmd(fleet, zenoh_router, rrd, 60.0)!r} + ['--parent-pid', str(os.getpid())], "
         "stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)\n"
         "print(p.pid, flush=True)\n"
         "time.sleep(0.5)\n"
@@ -312,7 +294,7 @@ def test_observer_process_exits_when_its_parent_dies(router, tmp_path):
 
 @pytest.mark.slow
 def test_observer_process_without_a_router_fails_cleanly(tmp_path):
-    cmd = _observer_cmd(f"t{uuid.uuid4().hex[:12]}", f"tcp/127.0.0.1:{_free_port()}", tmp_path / "x.rrd", 5.0)
+    cmd = _observer_cmd(f"t{uuid.uuid4().hex[:12]}", f"tcp/127.0.0.1:{free_port()}", tmp_path / "x.rrd", 5.0)
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=30, check=False)
     assert proc.returncode == 1 and "cannot open the Zenoh session" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
