@@ -49,7 +49,7 @@ class Topology:
         self._version = 0  # counts changes of the known graph, for the edge memo
         self._sent_mine: list[str] | None = None  # our neighbours in our last message, and when we sent it
         self._sent_at = -float("inf")
-        self._cache: tuple[frozenset, frozenset] | None = None  # (known graph, its bridges): graphs change rarely
+        self._cache: tuple | None = None  # ((version, fresh reporters, our neighbours), bridges): they change rarely
         self._memo: tuple | None = None  # ((t, version), bridges or None when incomplete): see edge
 
     def heard(self, peer: str, t: float) -> None:
@@ -117,17 +117,23 @@ class Topology:
         return Edge.TREE if frozenset((self.me, peer)) in found else Edge.LOOP
 
     def _bridges(self, t: float, mine: frozenset[str]) -> frozenset | None:
-        """The bridges of the graph known at ``t``, or ``None`` when that knowledge is incomplete."""
+        """The bridges of the graph known at ``t``, or ``None`` when that knowledge is incomplete. The graph is
+        a function of the graph version, which reports are fresh and our own neighbours: it is rebuilt (O(N^2)
+        for N agents) only when one of those changes, not at every step."""
         lifetime = report_lifetime(self.timeout)
-        reports = {a: n for a, (w, n) in self._reports.items() if t - w <= lifetime}
-        reports[self.me] = mine
+        fresh = frozenset(a for a, (w, _) in self._reports.items() if t - w <= lifetime)
+        key = (self._version, fresh, mine)
+        if self._cache is None or self._cache[0] != key:
+            self._cache = (key, self._bridges_of({a: self._reports[a][1] for a in fresh} | {self.me: mine}))
+        return self._cache[1]
+
+    @staticmethod
+    def _bridges_of(reports: dict[str, frozenset[str]]) -> frozenset | None:
         seen = set(reports) | {n for ns in reports.values() for n in ns}
         if not seen <= set(reports):
             return None
-        graph = frozenset(frozenset((a, n)) for a, ns in reports.items() for n in ns if n != a)
-        if self._cache is None or self._cache[0] != graph:
-            names = sorted(seen)
-            index = {name: i for i, name in enumerate(names)}
-            found = bridges(len(names), [tuple(index[x] for x in e) for e in graph])
-            self._cache = (graph, frozenset(frozenset(names[i] for i in e) for e in found))
-        return self._cache[1]
+        graph = {frozenset((a, n)) for a, ns in reports.items() for n in ns if n != a}
+        names = sorted(seen)
+        index = {name: i for i, name in enumerate(names)}
+        found = bridges(len(names), [tuple(index[x] for x in e) for e in graph])
+        return frozenset(frozenset(names[i] for i in e) for e in found)

@@ -48,8 +48,7 @@ class WorldTruth:
         if targets is not None:
             targets = [_target(entry) for entry in _of_type(targets, list, "targets")]
         if uavs is not None:  # the simulator's knowledge of where everyone is: the radio's range check
-            uavs = {str(k): _vector(v, f"uavs.{k}") for k, v in _of_type(uavs, dict, "uavs").items() if k != self.me}
-            self.uav_positions = uavs
+            self.uav_positions = _positions(_of_type(uavs, dict, "uavs"), self.me)
         if targets is not None:
             self._targets = (env.stamp, targets)
         fire_truth = (env.payload.get("fire"), env.payload.get("decoys", []))
@@ -87,6 +86,21 @@ def _vector(value, name: str) -> np.ndarray:
     if out is None or out.shape != (3,) or not np.all(np.isfinite(out)):
         raise DecodeError("bad_truth", f"{name} must be 3 finite numbers, got {value!r:.60}")
     return out
+
+
+def _positions(uavs: dict, me: str) -> dict[str, np.ndarray]:
+    """Every other UAV's position, each checked as :func:`_vector` checks one, in one array (the truth brings N of
+    them at every step); a malformed entry is named by the per-entry check."""
+    names = [str(k) for k in uavs if k != me]
+    values = [v for k, v in uavs.items() if k != me]
+    try:
+        table = np.array(values, dtype=float).reshape(len(values), 3)
+        plain = all(isinstance(v, list | tuple) and all(type(x) in (float, int) for x in v) for v in values)
+    except (TypeError, ValueError):
+        table, plain = None, False
+    if table is None or not plain or not np.isfinite(table).all():
+        return {name: _vector(v, f"uavs.{name}") for name, v in zip(names, values, strict=True)}
+    return dict(zip(names, table, strict=True))
 
 
 def _target(entry) -> dict:

@@ -67,6 +67,9 @@ def test_a_malformed_fire_is_rejected_and_the_rest_is_kept():
     ({"uavs": [[0, 0, 0]]}, "uavs as a list"),
     ({"uavs": {"uav1": [0, 0, float("inf")]}}, "an infinite UAV position"),
     ({"uavs": {"uav1": "north"}}, "a UAV position as a string"),
+    ({"uavs": {"uav1": ["1", "2", "3"]}}, "coordinates as strings of digits"),
+    ({"uavs": {"uav1": [1.0, 2.0, True]}}, "a bool coordinate of a UAV"),
+    ({"uavs": {"uav1": [1.0, 2.0, 3.0], "uav2": [1.0, 2.0], "uav3": [0.0, 0.0, 0.0]}}, "one UAV of three 2-D"),
 ])
 def test_malformed_target_states_or_uav_positions_are_rejected_and_nothing_is_kept(payload, what):
     """Bad input (reliability audit: 1,067 malformed truths crashed agents): {what}."""
@@ -79,3 +82,12 @@ def test_malformed_target_states_or_uav_positions_are_rejected_and_nothing_is_ke
     assert err.value.reason == "bad_truth", what
     np.testing.assert_allclose(world.targets_at(0.0)[0]["position"], [1.0, 2.0, 0.0])
     np.testing.assert_allclose(world.uav_positions["uav1"], [5.0, 5.0, -80.0])
+
+
+def test_uav_positions_leave_out_this_agent_and_keep_every_other_one():
+    world = WorldTruth(FlatTerrain(), "uav0")
+    uavs = {"uav0": [9.0, 9.0, 9.0], "uav1": [1, 2, -80], "uav2": [0.5, -4.0, -60.0]}
+    world.accept(truth(0.0, targets=[], uavs=uavs))
+    assert set(world.uav_positions) == {"uav1", "uav2"}
+    np.testing.assert_array_equal(world.uav_positions["uav1"], [1.0, 2.0, -80.0])
+    np.testing.assert_array_equal(world.uav_positions["uav2"], [0.5, -4.0, -60.0])
