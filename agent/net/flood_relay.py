@@ -165,9 +165,12 @@ class FloodRelay:
         neighbours = list(neighbours)
         everyone = frozenset(neighbours)
         out = []
+        covered: dict[str, bool] = {}  # source -> is every neighbour of ours the source or one of its neighbours?
         for inc in self._held.values():
             if inc.settled == everyone:  # every current neighbour holds it: nothing to check (O(1) per step)
                 continue
+            if not self._may_be_due(inc, now, everyone, neighbours_of, covered):
+                continue  # whoever lacks it, it is not due now: no acknowledgement to look up (N per increment)
             unknown = everyone.difference(inc.holders)
             missing = [p for p in neighbours if p in unknown and not self._holds(p, inc)]
             inc.holders.update(unknown.difference(missing))  # found to hold it by their acks: holding only grows
@@ -182,6 +185,22 @@ class FloodRelay:
             elif now - inc.arrived >= self.ack_timeout - 1e-9:
                 out.append(inc)
         return sorted(out, key=lambda inc: inc.t)
+
+    def _may_be_due(self, inc: Increment, now: float, everyone: frozenset[str],
+                    neighbours_of: Callable[[str], frozenset[str]], covered: dict[str, bool]) -> bool:
+        """Could :meth:`due` send ``inc`` now if a neighbour lacked it? Only when its acknowledgement timeout has
+        passed, when it is our own and new, or when it is new and some neighbour of ours is not a neighbour of
+        the agent it came from (who else could lack it is then exactly :meth:`due`'s question)."""
+        since = inc.arrived if inc.last_sent is None else inc.last_sent
+        if now - since >= self.ack_timeout - 1e-9:
+            return True
+        if inc.last_sent is not None:
+            return False
+        if inc.source == self.me:
+            return True
+        if inc.source not in covered:
+            covered[inc.source] = everyone - {inc.source} <= neighbours_of(inc.source)
+        return not covered[inc.source]
 
     def sent(self, now: float, increments: Iterable[Increment]) -> None:
         """``increments`` left in a broadcast at ``now``."""
