@@ -31,7 +31,15 @@ from agent.agent import Agent
 from agent.config import AgentScenario, read_scenario_file
 from agent.net.keys import Keys
 from agent.net.zenoh_transport import ZenohTransport, load_config
-from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
+from agent.runtime import (
+    LoopStats,
+    SimClock,
+    install_stop_handlers,
+    run_steps,
+    staggered_phase,
+    wait_for_epoch,
+    write_json,
+)
 
 log = logging.getLogger("skymesh.agent")
 
@@ -89,7 +97,8 @@ def main(argv=None) -> int:
                                args.parent_pid)
     try:
         stats = LoopStats() if epoch is None else run_steps(
-            agent.step, SimClock(epoch, args.speed), scenario.step, duration, stop, args.parent_pid
+            agent.step, SimClock(epoch, args.speed), scenario.step, duration, stop, args.parent_pid,
+            phase=staggered_phase(args.index, scenario.agents, scenario.step),
         )
     finally:
         transport.close()

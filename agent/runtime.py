@@ -84,18 +84,32 @@ class LoopStats:
         }
 
 
+def staggered_phase(index: int, count: int, dt: float) -> float:
+    """``dt * index / count``: the phase at which agent ``index`` of ``count`` runs its steps, so that the agents
+    of one machine wake one after another over the step instead of all at once (real UAVs' loops are not in
+    phase either). With N processes on fewer cores, waking together queues N steps behind each other at every
+    grid time; spread out, each finds the cores that the previous one left."""
+    if count < 1 or not 0 <= index:
+        raise ValueError(f"need 0 <= index and count >= 1, got index {index}, count {count}")
+    return dt * (index % count) / count
+
+
 def run_steps(step_fn, clock: SimClock, dt: float, duration: float, stop: threading.Event,
-              parent_pid: int | None = None) -> LoopStats:
-    """Call ``step_fn(t)`` at ``t = k dt`` on ``clock`` until ``duration``, ``stop`` or orphaning.
+              parent_pid: int | None = None, phase: float = 0.0) -> LoopStats:
+    """Call ``step_fn(t)`` at ``t = k dt`` on ``clock`` until ``duration``, ``stop`` or orphaning; each call is
+    made ``phase`` simulation seconds after its grid time (``0 <= phase < dt``, :func:`staggered_phase`), and
+    its deadline is the next call's time.
 
     ``parent_pid`` is the launcher's PID as the launcher gave it: checking against ``os.getppid()`` taken
     here would miss a launcher that died while this process was still importing."""
+    if not 0 <= phase < dt:
+        raise ValueError(f"phase must be in [0, dt = {dt}), got {phase}")
     stats = LoopStats()
     parent = os.getppid() if parent_pid is None else parent_pid
     k = 0
     while not stop.is_set() and k * dt <= duration + 1e-9:
         t = k * dt
-        delay = clock.wall(t) - time.time()
+        delay = clock.wall(t + phase) - time.time()
         if delay > 0 and stop.wait(delay):
             break
         if not parent_alive(parent):
@@ -105,9 +119,9 @@ def run_steps(step_fn, clock: SimClock, dt: float, duration: float, stop: thread
         step_fn(t)
         stats.cpu_s += time.process_time() - cpu
         stats.steps += 1
-        if time.time() > clock.wall(t + dt):
+        if time.time() > clock.wall(t + dt + phase):
             stats.deadline_misses += 1
-        k_next = max(k + 1, int(clock.now() / dt))
+        k_next = max(k + 1, int((clock.now() - phase) / dt))
         stats.skipped_steps += k_next - k - 1
         k = k_next
     return stats

@@ -21,8 +21,8 @@ def encode_bearings(bearings: list[Bearing]) -> np.ndarray:
     return np.array([[b.t, *b.sensor, *b.azel, b.R[0, 0], b.R[0, 1], b.R[1, 1]] for b in bearings], float)
 
 
-def decode_bearings(rows) -> list[Bearing]:
-    """Bearings from a received array; ``DecodeError("bad_field")`` naming the fault if it is not a
+def check_bearings(rows) -> list[list[float]]:
+    """The rows of a received array as plain floats; ``DecodeError("bad_field")`` naming the fault if it is not a
     ``(k, 9)`` finite float array of at most :data:`MAX_ROWS` rows with positive-definite covariances."""
     if not isinstance(rows, np.ndarray) or rows.dtype != np.float64 or rows.ndim != 2 or rows.shape[1] != COLUMNS:
         raise DecodeError("bad_field", f"bearings must be a (k, {COLUMNS}) float64 array")
@@ -33,5 +33,10 @@ def decode_bearings(rows) -> list[Bearing]:
     table = rows.tolist()  # a batch holds a few rows and comes with every message: plain floats beat ufuncs here
     if not all(r[6] > 0 and r[6] * r[8] - r[7] * r[7] > 0 for r in table):
         raise DecodeError("bad_field", "a bearing covariance is not positive definite")
+    return table
+
+
+def bearings_from_table(table: list[list[float]]) -> list[Bearing]:
+    """:class:`Bearing` objects from rows :func:`check_bearings` accepted (each owns its arrays)."""
     return [Bearing(r[0], np.array(r[1:4]), np.array(r[4:6]), np.array([[r[6], r[7]], [r[7], r[8]]]))
             for r in table]

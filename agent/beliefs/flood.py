@@ -22,7 +22,7 @@ acknowledgements stop the neighbours' retransmissions).
 
 from __future__ import annotations
 
-from agent.beliefs.bearing_codec import decode_bearings, encode_bearings
+from agent.beliefs.bearing_codec import bearings_from_table, check_bearings, encode_bearings
 from agent.beliefs.tracks import FUTURE_EPOCHS, TrackExchange
 from agent.net import wire
 from agent.net.flood_relay import FloodRelay, acks_from_wire
@@ -70,10 +70,10 @@ class FloodExchange(TrackExchange):
         increments, acks = self._decode(payload)
         self.relay.learn(origin, acks)
         methods = []
-        for source, n, rows, bearings in increments:
-            when = min(b.t for b in bearings)
-            if self.relay.accept(origin, t, source, n, when, rows):
-                self.held.append(bearings)
+        for source, n, rows, table in increments:
+            when = min(r[0] for r in table)
+            if self.relay.accept(origin, t, source, n, when, rows):  # Bearing objects only for what is new here
+                self.held.append(bearings_from_table(table))
                 self.latencies.append(t - when)
                 methods.append(("exact", None))
         return methods
@@ -104,10 +104,10 @@ class FloodExchange(TrackExchange):
             if len(entry) != 3 or not wire.is_int(entry[1]) or entry[1] < 0:  # the schema's rule, for any caller
                 raise wire.DecodeError("bad_field", "an increment is [origin, number >= 0, bearings]")
             origin, n, rows = entry
-            bearings = decode_bearings(rows)
-            if max(b.t for b in bearings) > newest:
+            table = check_bearings(rows)
+            if max(r[0] for r in table) > newest:
                 raise wire.DecodeError("future_epoch", f"detections more than {FUTURE_EPOCHS} steps ahead of ours")
-            out.append((origin, n, rows, bearings))
+            out.append((origin, n, rows, table))
         return out, held
 
     def metrics(self) -> dict:

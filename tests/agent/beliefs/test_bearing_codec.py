@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.beliefs.bearing_codec import MAX_ROWS, decode_bearings, encode_bearings
+from agent.beliefs.bearing_codec import MAX_ROWS, bearings_from_table, check_bearings, encode_bearings
 from agent.net.wire import DecodeError
 from agent.sensors.bearing import Bearing
 
@@ -23,7 +23,7 @@ def _batch(k=3) -> list[Bearing]:
 def test_a_batch_comes_back_as_it_was_sent_and_owns_its_arrays():
     bearings = _batch()
     rows = encode_bearings(bearings)
-    back = decode_bearings(rows)
+    back = bearings_from_table(check_bearings(rows))
     for b, c in zip(bearings, back, strict=True):
         assert c.t == b.t and type(c.t) is float
         assert np.array_equal(c.sensor, b.sensor) and np.array_equal(c.azel, b.azel) and np.array_equal(c.R, b.R)
@@ -56,5 +56,5 @@ def _with(row: int, column: int, value: float) -> np.ndarray:
 )
 def test_a_malformed_batch_is_refused_with_the_fault_named(rows, match):
     with pytest.raises(DecodeError, match=match) as err:
-        decode_bearings(rows)
+        check_bearings(rows)
     assert err.value.reason == "bad_field"

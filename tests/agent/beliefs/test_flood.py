@@ -14,6 +14,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
+from agent.beliefs import flood
 from agent.beliefs.flood import FloodExchange
 from agent.beliefs.tracking import Tracker
 from agent.beliefs.tracking_config import TrackerConfig
@@ -161,3 +162,21 @@ def test_detections_from_far_in_the_future_are_refused_as_a_clock_fault():
     with pytest.raises(wire.DecodeError) as err:
         agents["a"].receive("b", 99, 0.4, {"increments": [["b", 7, rows]], "acks": {}}, False, 0.4)
     assert err.value.reason == "future_epoch"
+
+
+def test_an_increment_heard_again_is_checked_but_not_applied_or_unpacked_twice(monkeypatch):
+    """A retransmission storm brings the same increments again and again: each copy is still checked (a bad one
+    refuses the message), but only the first becomes bearings to apply."""
+    agents, _ = run("position", "damped", steps=2, settle=0)
+    ex = agents["a"]
+    built = []
+    monkeypatch.setattr(flood, "bearings_from_table", lambda table: built.append(table) or [object()])
+    rows = np.array([[0.4, 0, 0, -80, 0, -1.0, 1e-4, 0, 1e-4]])
+    payload = {"increments": [["c", 50, rows]], "acks": {}}
+    ex.held = []
+    assert ex.receive("b", 99, 0.4, payload, False, 0.4) == [("exact", None)]
+    assert ex.receive("d", 17, 0.4, payload, False, 0.4) == []  # the same increment through another neighbour
+    assert len(built) == 1 and len(ex.held) == 1
+    bad = {"increments": [["c", 50, np.full((1, 9), np.nan)]], "acks": {}}
+    with pytest.raises(wire.DecodeError, match="finite"):
+        ex.receive("b", 100, 0.4, bad, False, 0.4)
