@@ -20,8 +20,14 @@ it, and
 * it is new here and some such neighbour cannot have heard it where it came from (it is not a
   neighbour of the agent we got it from, by the topology reports): sent in the same step, so information
   ``k`` hops away arrives within about ``k`` agent steps;
-* or nobody acknowledged it within ``ack_timeout`` of its last broadcast (or of its arrival, for one a
-  neighbour should have heard directly): a retransmission, which covers loss.
+* or nobody acknowledged it within ``ack_timeout`` of its last broadcast, or within ``RELAY_BACKOFF``
+  times that of its arrival for one a neighbour should have heard directly: a retransmission, which covers
+  loss. What a neighbour should have heard from its origin is the origin's to send again first (one
+  broadcast, after ``ack_timeout``); the others step in only once that retransmission has had its own round
+  trip. Otherwise every neighbour of a peer that is merely late — its acknowledgements delayed, not lost —
+  relays the origin's increments to it at once: N - 1 copies of each on a full mesh, more work for every
+  agent, later acknowledgements still, and a fleet near its CPU limit tips into a retransmission storm
+  (measured live with 16 agents on 2 cores: about 200 relays per agent in 20 s on a full mesh).
 
 Increments older than ``horizon`` seconds are dropped: no belief can use them any more (they fall outside
 every trajectory window).
@@ -37,6 +43,7 @@ import msgspec
 from agent.net.schemas import HeldWire
 
 ACK_SPAN = 64  # increments acknowledged below the highest one, per origin; chosen here (>> a window)
+RELAY_BACKOFF = 2.0  # x ack_timeout before relaying what a neighbour should have heard from the origin (see above)
 _MASK_LIMIT = 1 << ACK_SPAN
 
 
@@ -182,21 +189,19 @@ class FloodRelay:
                     out.append(inc)
             elif inc.source == self.me or not set(missing) <= neighbours_of(inc.source):
                 out.append(inc)
-            elif now - inc.arrived >= self.ack_timeout - 1e-9:
+            elif now - inc.arrived >= RELAY_BACKOFF * self.ack_timeout - 1e-9:
                 out.append(inc)
         return sorted(out, key=lambda inc: inc.t)
 
     def _may_be_due(self, inc: Increment, now: float, everyone: frozenset[str],
                     neighbours_of: Callable[[str], frozenset[str]], covered: dict[str, bool]) -> bool:
         """Could :meth:`due` send ``inc`` now if a neighbour lacked it? Only when its acknowledgement timeout has
-        passed, when it is our own and new, or when it is new and some neighbour of ours is not a neighbour of
-        the agent it came from (who else could lack it is then exactly :meth:`due`'s question)."""
-        since = inc.arrived if inc.last_sent is None else inc.last_sent
-        if now - since >= self.ack_timeout - 1e-9:
-            return True
+        passed (``RELAY_BACKOFF`` times it for a relay), when it is our own and new, or when it is new and some
+        neighbour of ours is not a neighbour of the agent it came from (who else could lack it is then exactly
+        :meth:`due`'s question)."""
         if inc.last_sent is not None:
-            return False
-        if inc.source == self.me:
+            return now - inc.last_sent >= self.ack_timeout - 1e-9
+        if inc.source == self.me or now - inc.arrived >= RELAY_BACKOFF * self.ack_timeout - 1e-9:
             return True
         if inc.source not in covered:
             covered[inc.source] = everyone - {inc.source} <= neighbours_of(inc.source)

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.net.flood_relay import ACK_SPAN, FloodRelay, Held, acks_from_wire, holds
+from agent.net.flood_relay import ACK_SPAN, RELAY_BACKOFF, FloodRelay, Held, acks_from_wire, holds
 
 STEP = 0.2
 
@@ -103,7 +103,7 @@ def _reference_due(relay: FloodRelay, now: float, neighbours: list[str], neighbo
                 out.append(inc)
         elif inc.source == relay.me or not set(missing) <= neighbours_of(inc.source):
             out.append(inc)
-        elif now - inc.arrived >= relay.ack_timeout - 1e-9:
+        elif now - inc.arrived >= RELAY_BACKOFF * relay.ack_timeout - 1e-9:
             out.append(inc)
     return sorted(out, key=lambda inc: inc.t)
 
@@ -146,6 +146,40 @@ def test_due_sends_exactly_what_the_rule_says_on_lossy_graphs_with_loops(seed):
         for _ in range(6):
             net.step()
     assert CheckedNet.checked > 300
+
+
+class LateNet(Net):
+    """A :class:`Net` in which one node's messages reach its neighbours ``lag`` steps late (a slow agent: its
+    acknowledgements are delayed, not lost)."""
+
+    def __init__(self, edges, late: str, lag: int, **kwargs):
+        super().__init__(edges, **kwargs)
+        self.late, self.lag, self.pipe = late, lag, []
+
+    def step(self, originate=()):
+        super().step(originate)
+        now = [(peer, m) for peer, box in self.inbox.items() for m in box if m[0] == self.late]
+        for peer, m in now:
+            self.inbox[peer].remove(m)
+        self.pipe.append(now)
+        if len(self.pipe) > self.lag:
+            for peer, m in self.pipe.pop(0):
+                self.inbox[peer].append(m)
+
+
+def test_a_late_peer_on_a_full_mesh_gets_one_retransmission_from_the_origin_and_no_relays():
+    """Five agents on a full mesh, one of them 3 steps late with everything it sends: the origins retransmit
+    to it once their acknowledgement timeout (2 steps) has passed, but nobody relays the origins' increments
+    — N - 1 copies of each, the storm that tipped a loaded fleet over (``RELAY_BACKOFF``)."""
+    names = "abcde"
+    net = LateNet({(x, y) for x in names for y in names if x < y}, late="e", lag=3)
+    for _ in range(12):
+        net.step(originate=["a", "b"])
+    for _ in range(6):
+        net.step()
+    assert all(r.relayed == 0 for r in net.relays.values())
+    assert net.relays["a"].retransmitted > 0 and net.relays["b"].retransmitted > 0
+    assert all(len(set(applied)) == 24 for applied in net.applied.values())
 
 
 def test_on_a_line_information_k_hops_away_arrives_in_k_steps():
