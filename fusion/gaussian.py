@@ -34,13 +34,14 @@ class Gaussian:
     """A Gaussian belief ``(y, Y)`` in information form. Construct with :meth:`from_moments`,
     :meth:`from_info` or :meth:`zeros`; the constructor itself trusts its arguments."""
 
-    __slots__ = ("y", "Y", "_mean", "_cov")
+    __slots__ = ("y", "Y", "_mean", "_cov", "_factor")
     epoch = None  # a timeless belief: it never needs aligning before the algebra (see ChannelFilter)
 
     def __init__(self, y: np.ndarray, Y: np.ndarray):
         self.y = y
         self.Y = Y
         self._mean = self._cov = None  # the moments, computed once (a belief is immutable): copies are handed out
+        self._factor = None  # the Cholesky factor of Y, shared by the mean and the covariance
 
     # -- construction ---------------------------------------------------------------------------
     @classmethod
@@ -92,7 +93,9 @@ class Gaussian:
     def _solve(self, rhs: np.ndarray) -> np.ndarray:
         """``Y^-1 rhs`` by Cholesky (:mod:`fusion.lapack`: scipy's wrappers cost ten times more than the
         arithmetic on a 6x6 matrix)."""
-        factor = lapack.cholesky(self.Y)
+        if self._factor is None:
+            self._factor = lapack.cholesky(self.Y)
+        factor = self._factor
         if factor is None:
             if not self.has_information:
                 raise UninformativeBeliefError("the belief has no information yet: mean and covariance are undefined")
