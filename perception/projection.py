@@ -17,7 +17,7 @@ import numpy as np
 
 from perception.camera import Intrinsics
 from perception.pose import CameraPose
-from perception.terrain import FlatTerrain, Terrain, intersect_ray
+from perception.terrain import FlatTerrain, Terrain, intersect_ray, unit_rays
 
 __all__ = ["pixel_to_ray_world", "world_to_pixel", "cast_ray", "cast_rays", "pixel_to_ground", "footprint"]
 
@@ -83,17 +83,9 @@ def cast_rays(
     """:func:`cast_ray` for ``k`` rays at once: origins and directions ``(k, 3)`` -> hits ``(k, 3)``, a row of
     NaN where a ray misses. Vectorised in closed form on :class:`~perception.terrain.FlatTerrain`; a loop over
     :func:`cast_ray` otherwise."""
-    o = np.asarray(origins, dtype=float)
-    d = np.asarray(directions, dtype=float)
-    if o.ndim != 2 or o.shape[1:] != (3,) or d.shape != o.shape:
-        raise ValueError(f"ray origins and directions must both have shape (k, 3), got {o.shape} and {d.shape}")
-    if not (np.all(np.isfinite(o)) and np.all(np.isfinite(d))):
-        raise ValueError("ray origins and directions must be finite")
-    norms = np.linalg.norm(d, axis=1)
-    if np.any(norms == 0.0):
-        raise ValueError("ray directions must be non-zero")
+    o, d = unit_rays(origins, directions)
     if isinstance(terrain, FlatTerrain):
-        return _flat_hits(terrain.level, o, d / norms[:, None], max_range)
+        return _flat_hits(terrain.level, o, d, max_range)
     out = np.full(o.shape, np.nan)
     for k, (origin, direction) in enumerate(zip(o, d, strict=True)):
         hit = cast_ray(terrain, origin, direction, max_range, tol)

@@ -29,6 +29,7 @@ __all__ = [
     "terrain_from_config",
     "terrain_gradient",
     "intersect_ray",
+    "unit_rays",
 ]
 
 
@@ -237,6 +238,21 @@ def terrain_gradient(terrain: Terrain, north: Any, east: Any, step: float = 1e-2
     gn = (np.asarray(terrain.height(n + step, e)) - np.asarray(terrain.height(n - step, e))) / (2.0 * step)
     ge = (np.asarray(terrain.height(n, e + step)) - np.asarray(terrain.height(n, e - step))) / (2.0 * step)
     return _as_output(gn), _as_output(ge)
+
+
+def unit_rays(origins: Any, directions: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Rays as rows: their origins and unit directions, both ``(k, 3)`` floats. ``ValueError`` naming the fault
+    for any other shape, a value that is not finite or a direction of zero length."""
+    o = np.asarray(origins, dtype=float)
+    d = np.asarray(directions, dtype=float)
+    if o.ndim != 2 or o.shape[1:] != (3,) or d.shape != o.shape:
+        raise ValueError(f"ray origins and directions must both have shape (k, 3), got {o.shape} and {d.shape}")
+    if not (np.isfinite(o).all() and np.isfinite(d).all()):
+        raise ValueError("ray origins and directions must be finite")
+    norms = np.linalg.norm(d, axis=1)
+    if np.any(norms == 0.0):
+        raise ValueError("ray directions must be non-zero")
+    return o, d / norms[:, None]
 
 
 def intersect_ray(

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from perception.terrain import unit_rays
+
 __all__ = [
     "PseudoIntersection",
     "pseudo_intersection",
@@ -48,18 +50,9 @@ class PseudoIntersection:
 
 
 def _rays(origins, directions, weights):
-    x = np.asarray(origins, dtype=float)
-    d = np.asarray(directions, dtype=float)
-    if x.ndim != 2 or x.shape[1] != 3 or d.shape != x.shape:
-        raise ValueError(f"origins and directions must both have shape (n, 3), got {x.shape} and {d.shape}")
+    x, d = unit_rays(origins, directions)
     if x.shape[0] < 2:
         raise ValueError(f"a pseudo-intersection needs at least 2 rays, got {x.shape[0]} (A is singular for one)")
-    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(d))):
-        raise ValueError("ray origins and directions must be finite")
-    norm = np.linalg.norm(d, axis=1)
-    if np.any(norm == 0.0):
-        raise ValueError("ray directions must be non-zero")
-    d = d / norm[:, None]
     n = x.shape[0]
     w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
     if w.shape != (n,) or not np.all(np.isfinite(w)) or np.any(w <= 0):
