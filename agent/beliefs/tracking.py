@@ -136,17 +136,23 @@ class Tracker:
         new_epoch = epoch > self.epoch
         self.epoch = max(self.epoch, epoch)
         for track in list(self.tracks.values()):
+            if self._timed_out(track):  # before predicting it: a track about to go needs no prediction
+                self._delete(track.id)
+                continue
             track.belief = track.belief.advanced_to(self.epoch)
-            if self._expired(track):
+            if self._too_uncertain(track):
                 self._delete(track.id)
         if new_epoch:
             self._predicted = {tid: track.belief for tid, track in self.tracks.items()}
 
-    def _expired(self, track: Track) -> bool:
+    def _timed_out(self, track: Track) -> bool:
+        """Tentative for longer than ``confirm_within`` steps, or measured by nobody for ``stale_after`` seconds."""
         if not track.confirmed and self.epoch - track.created_epoch >= self.config.confirm_within:
             return True
-        if self.epoch * self.model.step - track.last_measured > self.config.stale_after:
-            return True
+        return self.epoch * self.model.step - track.last_measured > self.config.stale_after
+
+    def _too_uncertain(self, track: Track) -> bool:
+        """Its position is unobservable, or its largest standard deviation exceeds ``max_position_std``."""
         try:
             cov = track.estimate().cov
         except UninformativeBeliefError:

@@ -649,5 +649,5 @@ def test_a_track_too_uncertain_is_deleted_exactly_when_its_largest_position_std_
         if abs(std - 40.0) < 1e-6:
             continue
         outcomes.add(std > 40.0)
-        assert tracker._expired(track) == (std > 40.0), std
+        assert tracker._too_uncertain(track) == (std > 40.0), std
     assert outcomes == {True, False}  # both sides of the limit were tried
