@@ -129,6 +129,7 @@ class Tracker:
         self._predicted: dict[int, Trajectory | ImmWindow] = {}  # track id -> its belief at this epoch's start
         self._gated: dict[int, dict[int, float]] = {}  # id(bearing) -> {track id: d^2}, for one update
         self._priors: dict[tuple[int, int], tuple | None] = {}  # (track id, offset) -> predicted position, one update
+        self._pending: list[Bearing] = []  # every bearing of the update under way (update_scans)
 
     # -- time -----------------------------------------------------------------------------------
     def advance(self, epoch: int) -> None:
@@ -180,10 +181,12 @@ class Tracker:
         the start are computed together, in one vectorised call. Returns counts of what happened."""
         counts = {"updated": 0, "initiated": 0, "unused": 0} | ({} if self.initiator is None else {"candidate": 0})
         self._gated, self._priors = {}, {}
+        self._pending = [b for scan in scans for b in scan]  # a track started mid-update is gated against all at once
         if not by_label:
-            self._distances([b for scan in scans for b in scan])
+            self._distances(self._pending)
         for bearings in scans:
             self._apply_scan(bearings, by_label, counts)
+        self._pending = []
         self._add_held()
         if self.initiator is not None:
             for handover in self.initiator.ready(self.epoch * self.model.step):
@@ -356,8 +359,8 @@ class Tracker:
         ids = list(self.tracks)
         known = [self._gated.setdefault(id(b), {}) for b in bearings]
         missing = {t for got in known for t in ids if t not in got}
-        if missing:
-            self._gate(bearings, [t for t in ids if t in missing])
+        if missing:  # new tracks: against every bearing of the update in one call, not again for each scan
+            self._gate(self._pending or bearings, [t for t in ids if t in missing])
         return ids, [[got[t] for t in ids] for got in known]
 
     def _gate(self, bearings: list[Bearing], ids: list[int]) -> None:
@@ -368,12 +371,12 @@ class Tracker:
             try:
                 by_offset.setdefault(self._offset(b), []).append(b)
             except ValueError:  # outside the window: no distance to anything
-                self._gated[id(b)].update(dict.fromkeys(ids, _UNASSIGNED))
+                self._gated.setdefault(id(b), {}).update(dict.fromkeys(ids, _UNASSIGNED))
         for offset, rows in by_offset.items():
             priors = [(t, self._position_prior(t, offset)) for t in ids]
             tracks = [t for t, prior in priors if prior is not None]
             for b in rows:
-                self._gated[id(b)].update({t: _UNASSIGNED for t, prior in priors if prior is None})
+                self._gated.setdefault(id(b), {}).update({t: _UNASSIGNED for t, prior in priors if prior is None})
             if not tracks:
                 continue
             means = np.array([prior[0] for _, prior in priors if prior is not None])
