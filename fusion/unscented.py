@@ -11,7 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fusion import validation
+from fusion import lapack, validation
 
 
 def default_kappa(n: int) -> float:
@@ -24,15 +24,15 @@ def sigma_points(mean, cov, kappa: float | None = None) -> tuple[np.ndarray, np.
     """Return the ``2n+1`` sigma points (rows) and their weights."""
     mean = validation.as_vector(mean, "mean")
     n = mean.shape[0]
-    cov = validation.as_psd(cov, "covariance", n)
+    cov = validation.as_symmetric(cov, "covariance", n)
     kappa = default_kappa(n) if kappa is None else float(kappa)
     if not np.isfinite(kappa):
         raise ValueError(f"kappa must be finite, got {kappa}")
     if kappa + n <= 0:
         raise ValueError(f"kappa + n must be positive, got kappa={kappa}, n={n}")
-    try:
-        root = np.linalg.cholesky((kappa + n) * cov)
-    except np.linalg.LinAlgError:  # semi-definite: fall back to the symmetric square root
+    root = lapack.cholesky((kappa + n) * cov)  # exists exactly when the covariance is positive definite
+    if root is None:  # semi-definite (or not a covariance at all): check, then the symmetric square root
+        cov = validation.as_psd(cov, "covariance", n)
         w, v = np.linalg.eigh((kappa + n) * cov)
         root = v * np.sqrt(np.clip(w, 0.0, None))
     points = np.vstack([mean, mean + root.T, mean - root.T])
