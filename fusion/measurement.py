@@ -181,6 +181,22 @@ def bearing3d_linearization(points, sensors) -> tuple[np.ndarray, np.ndarray, np
     return np.stack([np.arctan2(dy, dx), np.arctan2(-dz, rho)], -1), J, rho2
 
 
+def bearing3d_information(points, sensors, azel, R) -> tuple[np.ndarray, np.ndarray]:
+    """The extended information filter's terms (Merino (3.52)) of ``m`` bearings, each linearised at its own
+    position ``mu_j``: ``I_j = H_j^T R_j^-1 H_j`` ``(m, 3, 3)`` and ``i_j = H_j^T R_j^-1 (nu_j + H_j mu_j)``
+    ``(m, 3)``, with ``nu_j = z_j - h(mu_j)`` (azimuth wrapped) and ``h``, ``H`` those of :class:`Bearing3D` on the
+    position (:func:`bearing3d_linearization`); ``R^-1`` of each 2x2 in closed form. ``points``, ``sensors``
+    ``(m, 3)``, ``azel`` ``(m, 2)``, ``R`` ``(m, 2, 2)``; the caller makes sure each bearing is defined there."""
+    points = np.asarray(points, float)
+    z_hat, J, _ = bearing3d_linearization(points, sensors)
+    nu = np.asarray(azel, float) - z_hat
+    nu[:, 0] = wrap_angle(nu[:, 0])
+    a, b, c = R[:, 0, 0], R[:, 0, 1], R[:, 1, 1]
+    R_inv = np.stack([np.stack([c, -b], -1), np.stack([-b, a], -1)], -2) / (a * c - b * b)[:, None, None]
+    JtRi = np.swapaxes(J, -1, -2) @ R_inv
+    return JtRi @ J, (JtRi @ (nu + (J @ points[..., None])[..., 0])[..., None])[..., 0]
+
+
 def bearing_gate_distances(sensors, azel, R, means, covs) -> np.ndarray:
     """Merino (3.64) for every pair of ``m`` bearings and ``k`` position beliefs at once: ``d^2 = nu^T S^-1 nu``
     with ``S = H P H^T + R`` and ``nu = z - h(mu)`` (azimuth wrapped), ``h`` and ``H`` those of

@@ -59,13 +59,7 @@ from fusion import lapack
 from fusion.channel_filter import ChannelFilter, Received
 from fusion.gaussian import Gaussian, UninformativeBeliefError
 from fusion.imm_window import ImmWindow, ImmWindowModel
-from fusion.measurement import (
-    Bearing3D,
-    PositionMeasurement,
-    bearing3d_linearization,
-    bearing_gate_distances,
-    wrap_angle,
-)
+from fusion.measurement import Bearing3D, PositionMeasurement, bearing3d_information, bearing_gate_distances
 from fusion.motion import ConstantVelocity, DampedVelocity
 from fusion.resync import Edge
 from fusion.trajectory import Trajectory, TrajectoryModel, intersect_on_newest
@@ -306,17 +300,10 @@ class Tracker:
         self._held = {}
         if not held:
             return
-        points = np.array([self._prediction(track, offset).mean[:3] for track, _, offset in held])
-        sensors = np.array([b.sensor for _, b, _ in held])
-        z_hat, J, _ = bearing3d_linearization(points, sensors)  # defined: each pair passed its gate there
-        nu = np.array([b.azel for _, b, _ in held]) - z_hat
-        nu[:, 0] = wrap_angle(nu[:, 0])
-        R = np.array([b.R for _, b, _ in held])
-        a, b_, c = R[:, 0, 0], R[:, 0, 1], R[:, 1, 1]
-        R_inv = np.stack([np.stack([c, -b_], -1), np.stack([-b_, a], -1)], -2) / (a * c - b_ * b_)[:, None, None]
-        JtRi = np.swapaxes(J, -1, -2) @ R_inv
-        infos = JtRi @ J
-        vectors = (JtRi @ (nu + (J @ points[..., None])[..., 0])[..., None])[..., 0]
+        infos, vectors = bearing3d_information(  # defined: each pair passed its gate at the prediction
+            np.array([self._prediction(track, offset).mean[:3] for track, _, offset in held]),
+            np.array([b.sensor for _, b, _ in held]), np.array([b.azel for _, b, _ in held]),
+            np.array([b.R for _, b, _ in held]))
         by_track: dict[int, list[int]] = {}
         for j, (track, _, _) in enumerate(held):
             by_track.setdefault(track.id, []).append(j)

@@ -14,6 +14,7 @@ from fusion.measurement import (
     Bearing3D,
     PositionMeasurement,
     azel_to_los,
+    bearing3d_information,
     bearing3d_linearization,
     bearing_gate_distances,
     los_to_azel,
@@ -224,3 +225,22 @@ def test_vectorised_bearing_geometry_equals_the_per_bearing_model(seed):
             np.testing.assert_allclose(J[i, j], H[:, :3], rtol=1e-10, atol=1e-15)
             assert d2[i, j] == pytest.approx(_scalar_gate_distance(sensors[i], azel[i], R[i], means[j], covs[j]),
                                              rel=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_vectorised_bearing_information_equals_the_per_bearing_model(seed):
+    """bearing3d_information against Bearing3D one bearing at a time: ``H^T R^-1 H`` and ``H^T R^-1 (nu + H mu)``
+    on the position, azimuths across the +-pi cut included."""
+    rng = np.random.default_rng(seed)
+    geometry = [random_geometry(rng, 3) for _ in range(6)]
+    sensors, points = np.array([g[0] for g in geometry]), np.array([g[1] for g in geometry])
+    azel = np.column_stack([rng.uniform(-np.pi, np.pi, 6), rng.uniform(-1.4, -0.2, 6)])
+    R = np.array([(lambda A: A @ A.T + 1e-5 * np.eye(2))(rng.normal(size=(2, 2)) * 1e-2) for _ in range(6)])
+    infos, vectors = bearing3d_information(points, sensors, azel, R)
+    for j in range(6):
+        model = Bearing3D(6, sensors[j], R[j])
+        mu = np.concatenate([points[j], np.zeros(3)])
+        h, H = model.linearize(mu)
+        HtRi = H.T @ np.linalg.inv(R[j])
+        np.testing.assert_allclose(infos[j], (HtRi @ H)[:3, :3], rtol=1e-9)
+        np.testing.assert_allclose(vectors[j], (HtRi @ (model.residual(azel[j], h) + H @ mu))[:3], rtol=1e-9)
