@@ -13,7 +13,7 @@ import numpy as np
 
 from fusion.measurement import azel_to_los_array
 from fusion.unscented import unscented_transform
-from perception.projection import cast_rays
+from perception.projection import cast_rays_on_raised
 
 
 def geolocate(
@@ -32,9 +32,8 @@ def geolocate(
     ``~ N(0, sensor_sigma^2 I)``. Returns ``None`` when the ray (or one of its sigma points) misses
     the terrain within ``max_range``: such a bearing cannot start a track on its own.
 
-    All 13 sigma points are cast together (:func:`perception.projection.cast_rays`: in closed form on
-    flat terrain). A terrain raised by ``dh`` is the same geometry as a camera lowered by ``dh``, with the
-    hit then raised back: the ray is cast from ``sensor + (dn, de, dd + dh)`` on the terrain itself."""
+    All 13 sigma points are cast together, each on the terrain raised by its ``dh``
+    (:func:`perception.projection.cast_rays_on_raised`: in closed form on flat terrain)."""
     sensor = np.asarray(sensor, float)
     mean = np.concatenate([np.asarray(azel, float), np.zeros(4)])
     cov = np.zeros((6, 6))
@@ -43,11 +42,8 @@ def geolocate(
     cov[3:, 3:] = sensor_sigma**2 * np.eye(3)
 
     def cast(points: np.ndarray) -> np.ndarray:
-        origins = sensor + points[:, 3:]
-        origins[:, 2] += points[:, 2]  # the camera lowered by dh ...
-        hits = cast_rays(terrain, origins, azel_to_los_array(points[:, :2]), max_range=max_range)
-        hits[:, 2] -= points[:, 2]  # ... and the hit raised back onto the raised terrain
-        return hits
+        return cast_rays_on_raised(terrain, sensor + points[:, 3:], azel_to_los_array(points[:, :2]), points[:, 2],
+                                   max_range)
 
     try:
         return unscented_transform(cast, mean, cov, vectorized=True)

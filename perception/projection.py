@@ -19,7 +19,10 @@ from perception.camera import Intrinsics
 from perception.pose import CameraPose
 from perception.terrain import FlatTerrain, Terrain, intersect_ray, unit_rays
 
-__all__ = ["pixel_to_ray_world", "world_to_pixel", "cast_ray", "cast_rays", "pixel_to_ground", "footprint"]
+__all__ = [
+    "pixel_to_ray_world", "world_to_pixel", "cast_ray", "cast_rays", "cast_rays_on_raised", "pixel_to_ground",
+    "footprint",
+]
 
 #: Default longest ray considered when georeferencing (m, chosen here, as in perception.geolocation).
 DEFAULT_MAX_RANGE = 5000.0
@@ -92,6 +95,22 @@ def cast_rays(
         if hit is not None:
             out[k] = hit
     return out
+
+
+def cast_rays_on_raised(
+    terrain: Terrain,
+    origins,
+    directions,
+    raised,
+    max_range: float = DEFAULT_MAX_RANGE,
+) -> np.ndarray:
+    """:func:`cast_rays` on the terrain raised by ``raised[i]`` metres for ray ``i`` (a DEM error, Merino §3.7.1):
+    the same geometry as the ray's origin lowered by that much, with the hit raised back."""
+    lowered = np.array(origins, dtype=float)
+    lowered[:, 2] += raised
+    hits = cast_rays(terrain, lowered, directions, max_range)
+    hits[:, 2] -= raised
+    return hits
 
 
 def _flat_hits(level: float, o: np.ndarray, d: np.ndarray, max_range: float) -> np.ndarray:

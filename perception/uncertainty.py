@@ -28,7 +28,7 @@ import numpy as np
 from fusion.unscented import unscented_transform
 from perception.camera import MERINO_IR_CAMERA, Intrinsics
 from perception.pose import CameraMount, CameraPose, Gimbal, camera_rotation
-from perception.projection import DEFAULT_MAX_RANGE, cast_ray, cast_rays, pixel_to_ray_world
+from perception.projection import DEFAULT_MAX_RANGE, cast_ray, cast_rays_on_raised, pixel_to_ray_world
 from perception.rotations import rotation_from_euler
 from perception.terrain import FlatTerrain, Terrain
 
@@ -137,11 +137,8 @@ def geolocation_map(obs: Observation, terrain: Terrain, max_range: float = DEFAU
             obs.roll + delta[:, 3], obs.pitch + delta[:, 4], obs.yaw + delta[:, 5], obs.gimbal, obs.mount
         )
         centre = obs.position_ned + delta[:, :3] + R_nb @ obs.mount.offset
-        centre[:, 2] += delta[:, 8]  # a terrain raised by δh == a camera lowered by δh
         d = (R @ obs.intrinsics.ray(obs.pixel + delta[:, 6:8])[..., None])[..., 0]
-        hit = cast_rays(terrain, centre, d, max_range)
-        hit[:, 2] -= delta[:, 8]
-        return hit
+        return cast_rays_on_raised(terrain, centre, d, delta[:, 8], max_range)
 
     def generic(delta: np.ndarray) -> np.ndarray:
         out = np.full((len(delta), 3), np.nan)

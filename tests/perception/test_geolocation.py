@@ -12,7 +12,7 @@ import pytest
 from fusion.measurement import azel_to_los
 from fusion.unscented import sigma_points, unscented_transform
 from perception.geolocation import geolocate
-from perception.projection import cast_ray, cast_rays
+from perception.projection import cast_ray, cast_rays, cast_rays_on_raised
 from perception.terrain import FlatTerrain, HillsTerrain, intersect_ray
 
 TERRAINS = {"flat": FlatTerrain(2.0), "hills": HillsTerrain(8.0, 200.0, seed=3)}
@@ -121,3 +121,14 @@ def test_a_vectorized_transform_equals_the_point_by_point_one():
 
     one, many = unscented_transform(polar, mean, cov), unscented_transform(polar_rows, mean, cov, vectorized=True)
     assert np.allclose(one[0], many[0], rtol=0, atol=1e-14) and np.allclose(one[1], many[1], rtol=0, atol=1e-14)
+
+
+def test_casting_on_a_raised_terrain_equals_casting_on_the_higher_plane():
+    """Oracle: a flat terrain at height h + dh is the flat terrain at h raised by dh, ray by ray."""
+    origins, directions = _rays(np.random.default_rng(4), 50)
+    raised = np.random.default_rng(5).normal(0.0, 3.0, 50)
+    hits = cast_rays_on_raised(FlatTerrain(2.0), origins, directions, raised, max_range=400.0)
+    for o, d, dh, hit in zip(origins, directions, raised, hits, strict=True):
+        want = cast_rays(FlatTerrain(2.0 + dh), o[None], d[None], max_range=400.0)[0]
+        np.testing.assert_allclose(hit, want, rtol=0, atol=1e-9)
+    assert 5 < np.isnan(hits[:, 0]).sum() < 45
