@@ -56,10 +56,11 @@ class Agent:
         plan = scenario.radio_plan
         self.sender = SendScheduler(scenario.sending, None if plan is None else plan.sender_budget(agent_id))
         self.topology = Topology(agent_id)
+        self.exchanges: dict = {}
         context = ExchangeContext(agent_id, scenario, self.terrain, seed, self.sender, self, self.unused,
-                                  self.topology)
+                                  self.topology, Views(self.exchanges), self.vehicle)
         built = {kind: build(context) for kind, build in EXCHANGES.items()}
-        self.exchanges = {kind: exchange for kind, exchange in built.items() if exchange is not None}
+        self.exchanges.update((kind, exchange) for kind, exchange in built.items() if exchange is not None)
         self.extra_sensors = [s for exchange in self.exchanges.values() for s in exchange.sensors()]
         hints = {k: v for exchange in self.exchanges.values() for k, v in exchange.planning_hints().items()}
         self.planner = planner_from_config(scenario.tasking, PlanningContext(

@@ -72,7 +72,8 @@ class AgentScenario:
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
         if int(self.agents) != self.agents or self.agents < 1:
             raise ValueError(f"agents must be a positive integer, got {self.agents!r}")
-        check_tasking(self.tasking, frozenset({"track"} | ({"grid"} if self.grid is not None else set())))
+        grid = {"grid"} if self.grid is not None else set()
+        check_tasking(self.tasking, frozenset({"track", "tasks"} | grid))  # "tasks": built for the assignment
 
     @property
     def step(self) -> float:

@@ -2,7 +2,8 @@
 Soup's tiny ``base.py`` per component family.
 
 A planner is called once per agent cycle with the vehicle's state and the read-only *views* of the
-agent's beliefs, keyed by belief kind (``"track"``: :class:`TrackView`, ``"grid"``: :class:`MapView`),
+agent's beliefs, keyed by belief kind (``"track"``: :class:`TrackView`, ``"grid"``: :class:`MapView`, ``"tasks"``:
+:class:`AssignmentView`),
 and returns a :class:`tasking.orbit.Goal` (plain data; the vehicle turns it into a setpoint). A planner
 reads only the views it needs; a view it needs but the agent does not hold is a configuration error,
 caught when the planner is built (:mod:`tasking.registry`).
@@ -17,6 +18,7 @@ from typing import Protocol
 import numpy as np
 
 from tasking.orbit import Goal
+from tasking.tasks import Task
 
 
 class VehicleStateLike(Protocol):
@@ -40,6 +42,18 @@ class MapView:
     probability: np.ndarray
     centres: np.ndarray
     beta: tuple[np.ndarray, np.ndarray] | None = None
+
+
+@dataclass(frozen=True)
+class AssignmentView:
+    """This vehicle's share of the fleet's agreed assignment (:mod:`agent.beliefs.assignment`): the task it
+    serves now (``None``: nothing won), whether it must go home (every task is out of its reach), where its
+    base is, and its peers' last reported (north, east) positions."""
+
+    task: Task | None
+    home: bool
+    base: np.ndarray
+    peers: Mapping[str, np.ndarray]
 
 
 class Planner(Protocol):

@@ -2,7 +2,9 @@
 
 ``planner = "placeholder"`` (default; :class:`tasking.planner.PlaceholderPlanner`: search its lane, then
 orbit a confirmed track) or ``"entropy"`` (:class:`tasking.entropy.EntropyPlanner`: the information-gain
-explorer of Merino (4.21)-(4.24) over the agent's fire map). The other keys of the section are that
+explorer of Merino (4.21)-(4.24) over the agent's fire map) or ``"assignment"``
+(:class:`tasking.assignment.AssignmentPlanner`: serve the task the fleet agreed on by consensus, CBBA).
+The other keys of the section are that
 planner's parameters; unknown keys, wrong types and a planner whose views the agent does not hold are
 errors with the key's name, found when the scenario is read.
 
@@ -16,6 +18,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from numbers import Real
 
+from tasking.assignment import AssignmentConfig, AssignmentPlanner
 from tasking.base import Planner
 from tasking.entropy import EntropyPlanner, EntropyPlannerConfig
 from tasking.planner import PlaceholderPlanner
@@ -41,6 +44,10 @@ def _placeholder(options: dict, ctx: PlanningContext) -> Planner:
     return PlaceholderPlanner(ctx.index, ctx.agents, ctx.area, ctx.altitude, seed=ctx.seed, **options)
 
 
+def _assignment(options: dict, ctx: PlanningContext) -> Planner:
+    return AssignmentPlanner(AssignmentConfig.from_options(options), ctx.area, ctx.altitude)
+
+
 def _entropy(options: dict, ctx: PlanningContext) -> Planner:
     pd, pf = ctx.hints["detection"]
     return EntropyPlanner(EntropyPlannerConfig(pd=pd, pf=pf, **options), ctx.area, ctx.altitude)
@@ -51,6 +58,7 @@ class PlannerEntry:
     build: Callable[[dict, PlanningContext], Planner]
     needs: str  # the view (belief kind) the planner reads
     options: dict[str, type | tuple[type, ...]]  # allowed keys -> accepted types
+    check: Callable[[dict], object] | None = None  # validates the values (ValueError), when the scenario is read
 
 
 _NUMBER = (Real,)
@@ -58,6 +66,9 @@ PLANNERS: dict[str, PlannerEntry] = {
     "placeholder": PlannerEntry(_placeholder, "track", {
         "search": str, "spacing": _NUMBER, "orbit_radius": _NUMBER, "acceptance_radius": _NUMBER,
         "orbit_direction": int, "speed": _NUMBER}),
+    "assignment": PlannerEntry(_assignment, "tasks", {
+        f.name: (int if f.name == "capacity" else _NUMBER) for f in fields(AssignmentConfig)},
+        AssignmentConfig.from_options),
     "entropy": PlannerEntry(_entropy, "grid", {
         f.name: (int if f.name == "horizon" else _NUMBER) for f in fields(EntropyPlannerConfig)
         if f.name not in ("pd", "pf")}),  # P_D and P_F are the grid sensor's ([grid] pd, pf)
@@ -80,6 +91,8 @@ def check_tasking(section: dict, views: frozenset[str] | None = None) -> tuple[s
     for key, value in options.items():
         if isinstance(value, bool) or not isinstance(value, entry.options[key]):
             raise ValueError(f"tasking.{key} has the wrong type: {value!r}")
+    if entry.check is not None:
+        entry.check(options)
     if views is not None and entry.needs not in views:
         raise ValueError(f"tasking.planner = {name} needs a [{entry.needs}] section (it plans on that belief); "
                          f"the agent holds {sorted(views)}")

@@ -1,7 +1,8 @@
 """Belief exchanges (:class:`agent.plugins.BeliefExchange`), one per wire kind, and their registry.
 
 ``EXCHANGES`` maps a wire kind to a builder that returns the exchange when the scenario asks for it
-(``None`` otherwise): tracks always, a grid with a ``[grid]`` section. Adding a belief kind is one module
+(``None`` otherwise): tracks always, a grid with a ``[grid]`` section, the fleet's task assignment with
+``[tasking] planner = "assignment"``. Adding a belief kind is one module
 in this folder plus one line here.
 
 A builder imports its exchange's module only when the scenario asks for it if that module is heavy: the grid
@@ -18,6 +19,8 @@ from agent.beliefs.flood import FloodExchange
 from agent.beliefs.tracks import TrackExchange
 from agent.net.sending import SendScheduler
 from agent.plugins import BeliefExchange, Outbox
+from tasking.assignment import AssignmentConfig
+from tasking.registry import check_tasking
 
 
 @dataclass(frozen=True)
@@ -32,6 +35,8 @@ class ExchangeContext:
     outbox: Outbox
     unused: Counter  # observations the agent could not use, by reason
     topology: object  # agent.net.topology.Topology: who hears whom, as the agent knows it
+    views: object = None  # agent.plugins.Views: the other exchanges' views (filled once all are built)
+    vehicle: object = None  # agent.vehicles.base.Vehicle: where this agent is
 
 
 def _tracks(ctx: ExchangeContext) -> TrackExchange:
@@ -51,7 +56,19 @@ def _grid(ctx: ExchangeContext) -> BeliefExchange | None:
     return GridExchange(ctx.me, sc.grid, sc.area.as_tuple(), ctx.terrain, ctx.seed + 7919, ctx.outbox)
 
 
+def _tasks(ctx: ExchangeContext) -> BeliefExchange | None:
+    sc = ctx.scenario
+    name, options = check_tasking(sc.tasking)
+    if name != "assignment":
+        return None
+    from agent.beliefs.assignment import AssignmentExchange
+
+    return AssignmentExchange(ctx.me, AssignmentConfig.from_options(options), sc.area.as_tuple(),
+                              ctx.vehicle.state().position, ctx.views, ctx.vehicle)
+
+
 EXCHANGES: dict[str, Callable[[ExchangeContext], BeliefExchange | None]] = {
     "track": _tracks,
     "grid": _grid,
+    "tasks": _tasks,
 }

@@ -83,6 +83,21 @@ class TopologyPayload(TypedDict):
                        msgspec.Meta(max_length=MAX_PEERS)]
 
 
+MAX_TASKS = 1024  # tasks in one bid message (chosen here: tracks plus search cells)
+TaskKey = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
+#: ``[key, north, east, winner, bid]``: one task's winner as the sender knows it (``key`` "track": matched by position)
+TaskBid = tuple[TaskKey, float, float, PeerName, float]
+
+
+class TasksPayload(TypedDict):
+    """Kind ``tasks``: CBBA bids (:mod:`agent.beliefs.assignment`): the sender's (north, east), its timestamps
+    ``s_ik`` per vehicle, and per task the winner and winning bid it knows."""
+
+    at: tuple[float, float]
+    stamps: Annotated[dict[PeerName, float], msgspec.Meta(max_length=MAX_PEERS)]
+    tasks: Annotated[list[TaskBid], msgspec.Meta(max_length=MAX_TASKS)]
+
+
 class TargetTruth(TypedDict):
     id: str
     position: Vec3
@@ -108,6 +123,7 @@ class Schema:
 PAYLOADS: dict[str, Schema] = {
     "track": Schema(TrackPayload),
     "topology": Schema(TopologyPayload),
+    "tasks": Schema(TasksPayload),
     "truth": Schema(TruthPayload, reason="bad_truth"),
     "telemetry": Schema(Generic),
     "measurement": Schema(Generic),

@@ -19,8 +19,9 @@ from agent.net.radio import RadioTransport
 from agent.net.sending import SendScheduler
 from agent.net.topology import Topology
 from agent.net.zenoh_transport import ZenohTransport
+from agent.plugins import Views
 from agent.sensors.registry import SENSORS, sensor_from_config
-from agent.vehicles import VEHICLES
+from agent.vehicles import VEHICLES, vehicle_from_config
 from agent.vehicles.base import Vehicle
 from perception.terrain import FlatTerrain
 from tasking.base import Planner
@@ -50,11 +51,13 @@ def fire_scenario() -> AgentScenario:
 
 
 def test_every_registered_exchange_is_a_belief_exchange():
-    sc = fire_scenario()
-    ctx = ExchangeContext("uav0", sc, FlatTerrain(), 1, SendScheduler(sc.sending, None), None, Counter(),
-                          Topology("uav0"))
-    built = {kind: build(ctx) for kind, build in EXCHANGES.items()}
-    assert set(built) == {"track", "grid"} and all(ex is not None for ex in built.values())
+    built = {}
+    for sc in (fire_scenario(), AgentScenario.from_dict({"tasking": {"planner": "assignment"}})):
+        vehicle = vehicle_from_config(sc.vehicle, sc.start_position(0))
+        ctx = ExchangeContext("uav0", sc, FlatTerrain(), 1, SendScheduler(sc.sending, None), None, Counter(),
+                              Topology("uav0"), Views({}), vehicle)
+        built.update((kind, ex) for kind, build in EXCHANGES.items() if (ex := build(ctx)) is not None)
+    assert set(built) == set(EXCHANGES) == {"track", "grid", "tasks"}
     for kind, exchange in built.items():
         assert exchange.kind == kind
         assert_implements(exchange, plugins.BeliefExchange)

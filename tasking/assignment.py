@@ -1,0 +1,132 @@
+"""``[tasking] planner = "assignment"``: the fleet's tasks, and the planner that serves what CBBA gave it.
+
+**Tasks** (thesis 000 §2.7.1, spec 000 §2.7): every confirmed track is a task to *keep in view* (value
+``track_value``), every cell of a ``search_cell`` grid over the area is a task to *search* (value
+``search_value``, less than a track's, so that no target is left unwatched while a cell is searched).
+Tasks are persistent: a vehicle serves one until the assignment changes. The assignment itself is reached
+by consensus (:mod:`tasking.cbba`, carried over the mesh by ``agent.beliefs.assignment``).
+
+**Serving** (:class:`AssignmentPlanner`): a track task is orbited at ``orbit_radius`` around its fused
+estimate (Andreetto et al.'s circle, spec 004 §2.8; the centre follows the estimate every cycle); a search
+cell is swept by a boustrophedon of ``spacing`` (:func:`tasking.search.lawnmower_waypoints`), resumed where
+it was left; ``home`` flies to the base; with no task the vehicle holds an orbit where it is.
+
+Parameters chosen here (the thesis gives none for the fleet): values 10 (track) and 1 (search), time
+discount λ = 0.95 per second (a target 100 m away at 10 m/s is worth 0.6 of one at hand), one task per
+vehicle (``capacity`` = L_t = 1: tasks are served continuously, not visited), ``stickiness`` 1.2.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Hashable, Mapping, Sequence
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from tasking.base import AssignmentView, VehicleStateLike
+from tasking.orbit import Goal, goto_goal, orbit_setpoint
+from tasking.search import Area, WaypointFollower, check_area, lawnmower_waypoints
+from tasking.tasks import Task
+
+
+@dataclass(frozen=True)
+class AssignmentConfig:
+    """The ``[tasking]`` keys of ``planner = "assignment"`` (see the module docstring for the defaults)."""
+
+    track_value: float = 10.0
+    search_value: float = 1.0
+    search_cell: float = 80.0  # m, side of a search cell
+    spacing: float = 40.0  # m, lawnmower leg spacing inside a cell
+    orbit_radius: float = 40.0  # m
+    discount: float = 0.95  # λ per second, (4.1)
+    capacity: int = 1  # L_t
+    stickiness: float = 1.2
+    cruise_speed: float = 10.0  # m/s, the travel-time estimate of the scores
+    match_radius: float = 25.0  # m: a peer's track task within this of ours is the same task
+    period: float = 1.0  # s between bid broadcasts when nothing changed
+
+    def __post_init__(self):
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+                raise ValueError(f"tasking.{f.name} must be a positive number, got {value!r}")
+        if not 0 < self.discount <= 1:
+            raise ValueError(f"tasking.discount (λ) must be in (0, 1], got {self.discount}")
+        if int(self.capacity) != self.capacity:
+            raise ValueError(f"tasking.capacity must be an integer, got {self.capacity}")
+        if self.stickiness < 1:
+            raise ValueError(f"tasking.stickiness must be ≥ 1, got {self.stickiness}")
+        if self.search_value >= self.track_value:
+            raise ValueError(f"tasking.search_value ({self.search_value}) must be below track_value "
+                             f"({self.track_value}): a target in view comes before an area to search")
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, object]) -> AssignmentConfig:
+        return cls(**{k: v for k, v in options.items() if k in {f.name for f in fields(cls)}})
+
+
+def search_cells(area: Area, cell: float) -> dict[str, np.ndarray]:
+    """The search cells' centres, keyed ``"search:<row>:<col>"``, tiling ``area`` with cells of about ``cell``."""
+    n0, n1, e0, e1 = check_area(area)
+    rows, cols = max(1, round((n1 - n0) / cell)), max(1, round((e1 - e0) / cell))
+    return {f"search:{r}:{c}": np.array([n0 + (r + 0.5) * (n1 - n0) / rows, e0 + (c + 0.5) * (e1 - e0) / cols])
+            for r in range(rows) for c in range(cols)}
+
+
+def cell_area(area: Area, key: str, cell: float) -> tuple[float, float, float, float]:
+    """The (north min, max, east min, max) of search cell ``key``."""
+    n0, n1, e0, e1 = check_area(area)
+    rows, cols = max(1, round((n1 - n0) / cell)), max(1, round((e1 - e0) / cell))
+    r, c = (int(x) for x in key.split(":")[1:])
+    dn, de = (n1 - n0) / rows, (e1 - e0) / cols
+    return (n0 + r * dn, n0 + (r + 1) * dn, e0 + c * de, e0 + (c + 1) * de)
+
+
+def fleet_tasks(tracks: Sequence[tuple[Hashable, np.ndarray]], cells: Mapping[str, np.ndarray],
+                config: AssignmentConfig) -> dict[Hashable, Task]:
+    """The task set: one ``track:<id>`` task per confirmed track, one ``search:r:c`` task per cell."""
+    tasks: dict[Hashable, Task] = {key: Task(key, centre, config.search_value, "search")
+                                   for key, centre in cells.items()}
+    for track_id, position in tracks:
+        key = f"track:{track_id}"
+        tasks[key] = Task(key, np.asarray(position, float)[:2], config.track_value, "track")
+    return tasks
+
+
+class AssignmentPlanner:
+    """Serve the task the fleet's consensus gave this vehicle (:class:`tasking.base.AssignmentView`)."""
+
+    def __init__(self, config: AssignmentConfig, area: Area, altitude: float):
+        self.config, self.area, self.altitude = config, check_area(area), float(altitude)
+        self._sweeps: dict[str, WaypointFollower] = {}
+        self._hold: np.ndarray | None = None
+        self.mode = "idle"
+        self.target_id: Hashable | None = None
+
+    def plan(self, state: VehicleStateLike, views: Mapping[str, object]) -> Goal:
+        view: AssignmentView = views["tasks"]
+        position = np.asarray(state.position, float)
+        task = view.task
+        self.target_id = None if task is None else task.key
+        if view.home:
+            self.mode = "home"
+            return goto_goal(view.base, self.altitude)
+        if task is None:
+            self.mode = "idle"
+            if self._hold is None:
+                self._hold = position[:2].copy()
+            return orbit_setpoint(self._hold, self.config.orbit_radius, self.altitude)
+        self._hold = None
+        self.mode = task.kind
+        if task.kind == "search":
+            return goto_goal(self._sweep(task.key).current(position)[:2], self.altitude)
+        return orbit_setpoint(task.position, self.config.orbit_radius, self.altitude)
+
+    def _sweep(self, key: str) -> WaypointFollower:
+        """The boustrophedon of one cell, kept so that a vehicle sent back to a cell resumes its sweep."""
+        if key not in self._sweeps:
+            cell = cell_area(self.area, key, self.config.search_cell)
+            path = lawnmower_waypoints(cell, self.config.spacing, self.altitude)
+            self._sweeps[key] = WaypointFollower(path, self.config.spacing / 2)
+        return self._sweeps[key]

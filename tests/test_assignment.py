@@ -1,0 +1,162 @@
+"""``[tasking] planner = "assignment"``: tasks from the fused picture, the planner that serves the agreed
+task, the ``tasks`` exchange between agents (matching, bad messages, the wire schema) and the agreement
+measure."""
+
+import math
+
+import numpy as np
+import pytest
+
+from agent.beliefs.assignment import AssignmentExchange, agreement
+from agent.net import wire
+from agent.plugins import Views
+from agent.vehicles import vehicle_from_config
+from fusion.resync import Edge
+from tasking.assignment import AssignmentConfig, AssignmentPlanner, cell_area, fleet_tasks, search_cells
+from tasking.base import AssignmentView, TrackView
+from tasking.registry import check_tasking
+from tasking.tasks import Task
+
+AREA = (-120.0, 120.0, -120.0, 120.0)
+
+
+class _Picture:
+    """A track exchange's view, as the assignment reads it."""
+
+    kind = "track"
+
+    def __init__(self, tracks):
+        self.tracks = tracks
+
+    def view(self):
+        return TrackView(self.tracks)
+
+
+def _exchange(me, position, tracks, **config):
+    vehicle = vehicle_from_config({"kind": "multirotor", "max_speed": 12.0}, [*position, -80.0])
+    return AssignmentExchange(me, AssignmentConfig(**config), AREA, vehicle.state().position,
+                              Views({"track": _Picture(tracks)}), vehicle)
+
+
+def _talk(a, b, t):
+    """One round: both settle, then each hears the other's message (through the real wire schema)."""
+    for x in (a, b):
+        x.settle(t)
+    for sender, receiver in ((a, b), (b, a)):
+        message = sender.outgoing(t, [receiver.me])
+        if message is not None:
+            data = wire.encode(wire.Envelope(kind="tasks", origin=sender.me, seq=int(t * 10) + 1, stamp=t,
+                                             payload=message.payload))
+            env = wire.decode(data)
+            receiver.receive(sender.me, env.seq, env.stamp, env.payload, Edge.TREE, t)
+
+
+def test_search_cells_tile_the_area():
+    cells = search_cells(AREA, 80.0)
+    assert len(cells) == 9
+    assert cells["search:0:0"].tolist() == [-80.0, -80.0]
+    assert cell_area(AREA, "search:2:1", 80.0) == (40.0, 120.0, -40.0, 40.0)
+
+
+def test_tracks_come_before_search_cells():
+    tasks = fleet_tasks([(7, np.array([1.0, 2.0, 0.0]))], search_cells(AREA, 120.0), AssignmentConfig())
+    assert tasks["track:7"].kind == "track" and tasks["track:7"].value == 10.0
+    assert {t.kind for k, t in tasks.items() if k != "track:7"} == {"search"}
+
+
+def test_two_agents_split_two_targets_and_agree():
+    tracks = [(0, np.array([-60.0, -60.0])), (1, np.array([60.0, 60.0]))]
+    # the two agents know the targets under different local ids, a few metres apart
+    a = _exchange("a", (-70.0, -70.0), tracks)
+    b = _exchange("b", (70.0, 70.0), [(5, np.array([58.0, 61.0])), (9, np.array([-61.0, -59.0]))])
+    for step in range(10):
+        _talk(a, b, 0.2 * step)
+    assert a.view().task.key == "track:0" and b.view().task.key == "track:5"  # each takes the nearer one
+    assert a.cbba.winners["track:1"] == "b" and b.cbba.winners["track:9"] == "a"
+    assert a.peers["b"].tolist() == [70.0, 70.0]
+
+
+def test_the_nearer_agent_wins_a_lone_target_and_the_other_searches():
+    tracks = [(0, np.array([100.0, 0.0]))]
+    a, b = _exchange("a", (90.0, 0.0), tracks), _exchange("b", (-90.0, 0.0), tracks)
+    for step in range(10):
+        _talk(a, b, 0.2 * step)
+    assert a.view().task.kind == "track"
+    assert b.view().task.kind == "search"
+
+
+def test_bids_are_resent_only_when_changed_or_due():
+    a = _exchange("a", (0.0, 0.0), [], period=1.0)
+    a.settle(0.0)
+    assert a.outgoing(0.0, []) is not None
+    assert a.outgoing(0.2, []) is None  # nothing changed
+    assert a.outgoing(1.0, []) is not None  # the heartbeat
+
+
+@pytest.mark.parametrize("payload, reason", [
+    ({"at": (0.0, math.nan), "stamps": {}, "tasks": []}, "non_finite"),  # a NaN position
+    ({"at": (0.0, 0.0), "stamps": {"b": math.inf}, "tasks": []}, "non_finite"),  # an infinite timestamp
+    ({"at": (0.0, 0.0), "stamps": {}, "tasks": [["search:9:9", 0.0, 0.0, "b", 1.0]]}, "bad_field"),  # no such cell
+])
+def test_a_bad_tasks_message_is_refused_and_changes_nothing(payload, reason):
+    a = _exchange("a", (0.0, 0.0), [])
+    a.settle(0.0)
+    before = dict(a.cbba.winners)
+    with pytest.raises(wire.DecodeError) as err:
+        a.receive("b", 1, 0.0, payload, Edge.TREE, 0.0)
+    assert err.value.reason == reason
+    assert a.cbba.winners == before and "b" not in a.peers
+
+
+@pytest.mark.parametrize("payload, reason", [
+    ({"at": [0.0], "stamps": {}, "tasks": []}, "bad_type"),  # a position with one coordinate
+    ({"at": [0.0, 0.0], "stamps": {}, "tasks": [["track", 0.0, 0.0, "", 1.0]]}, "bad_field"),  # an empty winner
+    ({"at": [0.0, 0.0], "stamps": {}, "tasks": [["track", "north", 0.0, "b", 1.0]]}, "bad_type"),
+])
+def test_the_wire_schema_rejects_malformed_bids(payload, reason):
+    data = wire.encode(wire.Envelope(kind="tasks", origin="b", seq=1, stamp=0.0, payload=payload))
+    with pytest.raises(wire.DecodeError) as err:
+        wire.decode(data)
+    assert err.value.reason == reason
+
+
+class _State:
+    def __init__(self, position):
+        self.position = np.asarray(position, float)
+
+
+def test_the_planner_serves_the_agreed_task():
+    planner = AssignmentPlanner(AssignmentConfig(), AREA, 80.0)
+    base = np.array([-120.0, 0.0])
+    track = Task("track:3", [10.0, 20.0], 10.0)
+    goal = planner.plan(_State([0.0, 0.0, -80.0]), {"tasks": AssignmentView(track, False, base, {})})
+    assert goal.is_orbit and goal.orbit_center.tolist() == [10.0, 20.0] and planner.mode == "track"
+    cell = Task("search:2:2", [80.0, 80.0], 1.0, "search")
+    goal = planner.plan(_State([0.0, 0.0, -80.0]), {"tasks": AssignmentView(cell, False, base, {})})
+    n0, n1, e0, e1 = cell_area(AREA, "search:2:2", 80.0)
+    assert not goal.is_orbit and n0 <= goal.position[0] <= n1 and e0 <= goal.position[1] <= e1
+    goal = planner.plan(_State([0.0, 0.0, -80.0]), {"tasks": AssignmentView(None, True, base, {})})
+    assert goal.position[:2].tolist() == base.tolist() and planner.mode == "home"
+    goal = planner.plan(_State([5.0, 6.0, -80.0]), {"tasks": AssignmentView(None, False, base, {})})
+    assert goal.is_orbit and goal.orbit_center.tolist() == [5.0, 6.0] and planner.mode == "idle"
+
+
+def test_agreement_counts_instants_and_how_fast_changes_settle():
+    same = {"car": "a"}
+    timelines = {"a": [(0.0, same), (1.0, {"car": "b"}), (2.0, {"car": "b"}), (3.0, {"car": "b"})],
+                 "b": [(0.0, same), (1.0, same), (2.0, {"car": "b"}), (3.0, {"car": "b"})]}
+    out = agreement(timelines, window=1.0)
+    assert out["agreed_fraction"] == 0.75 and out["changes"] == 2 and out["settled_within_window"] == 1.0
+    out = agreement(timelines, window=0.5)
+    assert out["settled_within_window"] == 0.5  # the change at 1 s settled only at 2 s
+
+
+@pytest.mark.parametrize("section, match", [
+    ({"planner": "assignment", "discount": 1.5}, "discount"),  # λ above 1 rewards waiting
+    ({"planner": "assignment", "search_value": 20.0}, "search_value"),  # searching worth more than a target
+    ({"planner": "assignment", "orbit_radius": -1.0}, "orbit_radius"),
+    ({"planner": "assignment", "capacity": 1.5}, "wrong type"),
+])
+def test_bad_tasking_sections_are_refused_when_the_scenario_is_read(section, match):
+    with pytest.raises(ValueError, match=match):
+        check_tasking(section, frozenset({"track", "tasks"}))
