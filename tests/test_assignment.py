@@ -141,14 +141,14 @@ def test_the_planner_serves_the_agreed_task():
     assert goal.is_orbit and goal.orbit_center.tolist() == [5.0, 6.0] and planner.mode == "idle"
 
 
-def test_agreement_counts_instants_and_how_fast_changes_settle():
-    same = {"car": "a"}
-    timelines = {"a": [(0.0, same), (1.0, {"car": "b"}), (2.0, {"car": "b"}), (3.0, {"car": "b"})],
-                 "b": [(0.0, same), (1.0, same), (2.0, {"car": "b"}), (3.0, {"car": "b"})]}
-    out = agreement(timelines, window=1.0)
-    assert out["agreed_fraction"] == 0.75 and out["changes"] == 2 and out["settled_within_window"] == 1.0
-    out = agreement(timelines, window=0.5)
-    assert out["settled_within_window"] == 0.5  # the change at 1 s settled only at 2 s
+def test_agreement_weighs_time_and_times_how_fast_changes_settle():
+    timelines = {"a": [(0.0, {"car": "a"}), (1.0, {"car": "b"})],
+                 "b": [(0.0, {"car": "a"}), (2.0, {"car": "b"})]}
+    out = agreement(timelines, end=4.0, window=1.0)
+    # agreed on [0, 1) and [2, 4): 3 of 4 s; the changes at 0, 1 and 2 s each settle within 1 s
+    assert out == {"agreed_time_share": 0.75, "changes": 3, "settled_within_window": 1.0}
+    assert agreement(timelines, end=4.0, window=0.5)["settled_within_window"] == 2 / 3  # 1 s -> 2 s is too slow
+    assert agreement({}, end=1.0, window=1.0)["changes"] == 0
 
 
 @pytest.mark.parametrize("section, match", [
