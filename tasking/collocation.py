@@ -478,6 +478,30 @@ def shifted_guess(previous: Plan, t: float, state: np.ndarray, config: PlannerCo
     return states, controls
 
 
+def orbit_guess(state: np.ndarray, target_mean, target_velocity, limits: VehicleLimits,
+                config: PlannerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """A second start: nodes 1..M-1 on a circle about the (first) predicted target, in the vehicle's current
+    sense of rotation about it, at radius ``max(1.2 V_min^2 / a_lat, r_fp / 2)`` and speed ``V_min`` (a
+    hovering-capable vehicle: mid-band speed); chosen here. Node 0 stays the measured state."""
+    target = _targets(target_mean, "target_mean")[0]
+    velocity = _targets(target_velocity, "target_velocity")[0]
+    radius = max(1.2 * limits.min_speed**2 / limits.max_lateral_accel, 0.5 * config.footprint_radius)
+    speed = limits.min_speed if limits.min_speed > 0 else 0.5 * limits.max_speed
+    rel = state[:2] - target
+    own_velocity = state[3] * np.array([math.cos(state[2]), math.sin(state[2])])
+    sense = 1.0 if rel[0] * own_velocity[1] - rel[1] * own_velocity[0] >= 0 else -1.0  # +1: clockwise from above
+    t = config.step * np.arange(config.nodes)
+    angle = math.atan2(rel[1], rel[0]) + sense * speed / radius * t
+    states = np.column_stack([target[0] + velocity[0] * t + radius * np.cos(angle),
+                              target[1] + velocity[1] * t + radius * np.sin(angle),
+                              angle + sense * math.pi / 2, np.full(config.nodes, speed)])
+    states[0] = state
+    states[:, 2] = np.unwrap(states[:, 2])  # headings continuous from the measured one
+    controls = np.zeros((config.nodes, 2))
+    controls[:, 1] = sense * speed / radius
+    return states, controls
+
+
 def plan(state, target_mean, target_velocity, limits: VehicleLimits, config: PlannerConfig = PlannerConfig(), *,
          t0: float = 0.0, wind=(0.0, 0.0), initial_guess: tuple[np.ndarray, np.ndarray] | None = None) -> Plan:
     """One collocation solve from ``state = (north, east, heading, speed)`` at time ``t0``, for the target(s)
@@ -525,19 +549,26 @@ class PlanSetpoint:
 
 
 class RecedingHorizonPlanner:
-    """Ross's receding horizon (spec 002 §2.7): replan every ``replan_period`` s (2 s) from the measured state,
-    warm-started from the previous plan (:func:`shifted_guess`); a failed solve keeps the previous plan
-    while it still covers the current time. :meth:`setpoint` is the call a planner makes every cycle."""
+    """Ross's receding horizon (spec 002 §2.7): replan every ``replan_period`` s (2 s) from the measured state.
+
+    Each replanning solves from the previous plan shifted in time (:func:`shifted_guess`; the first time
+    :func:`cold_guess`) and, if ``orbit_start``, also from :func:`orbit_guess`, and keeps the successful
+    plan of lower objective: the problem is not convex, and a fixed wing warm-started from its own plans
+    alone can settle on a wide circle with the target outside the footprint (chosen here). When every
+    solve fails the previous plan is kept while it still covers the current time. :meth:`setpoint` is the
+    call a planner makes every cycle."""
 
     def __init__(self, limits: VehicleLimits, config: PlannerConfig = PlannerConfig(), replan_period: float = 2.0,
-                 wind=(0.0, 0.0)):
+                 wind=(0.0, 0.0), orbit_start: bool = True):
         self.limits, self.config = limits, config
         self.replan_period = _positive("replan_period", replan_period)
         if self.replan_period > config.horizon:
             raise ValueError(f"replan_period ({replan_period}) must not exceed the horizon ({config.horizon})")
         self.wind = as_vector(wind, "wind", 2)
+        self.orbit_start = bool(orbit_start)
         self.plan: Plan | None = None
         self.solves: list[Plan] = []  # every solve, kept or not (timing and iteration statistics)
+        self.replan_times: list[float] = []  # wall time of each replanning (all its solves) [s]
 
     def setpoint(self, t: float, state, target_mean, target_velocity) -> PlanSetpoint:
         """The set-point at time ``t`` given the vehicle ``state`` (north, east, heading, speed) (see
@@ -551,12 +582,19 @@ class RecedingHorizonPlanner:
         return self._sample(float(t))
 
     def _replan(self, t: float, state: np.ndarray, target_mean, target_velocity) -> None:
-        guess = None if self.plan is None else shifted_guess(self.plan, t, state, self.config)
-        new = plan(state, target_mean, target_velocity, self.limits, self.config, t0=t, wind=self.wind,
-                   initial_guess=guess)
-        self.solves.append(new)
-        if new.success or self.plan is None or t > self.plan.end:
-            self.plan = new
+        started = time.perf_counter()
+        guesses = [None if self.plan is None else shifted_guess(self.plan, t, state, self.config)]
+        if self.orbit_start:
+            guesses.append(orbit_guess(state, target_mean, target_velocity, self.limits, self.config))
+        solved = [plan(state, target_mean, target_velocity, self.limits, self.config, t0=t, wind=self.wind,
+                       initial_guess=guess) for guess in guesses]
+        self.solves.extend(solved)
+        self.replan_times.append(time.perf_counter() - started)
+        good = [p for p in solved if p.success]
+        if good:
+            self.plan = min(good, key=lambda p: p.objective)
+        elif self.plan is None or t > self.plan.end:
+            self.plan = solved[0]
 
     def _sample(self, t: float) -> PlanSetpoint:
         n, e, heading, speed = self.plan.sample(t)
