@@ -7,7 +7,7 @@ Model, Ross (8) with the target's states replaced by its known constant-velocity
 
     ṅ = V cos ψ + w_n,   ė = V sin ψ + w_e,   ψ̇ = ω,   V̇ = a                                   (8)
 
-``w`` is the wind, the velocity of the air mass (Ross subtract it: their sign convention is "wind from").
+``w`` is the wind, the velocity of the air mass (Ross et al. subtract it: their convention is "wind from").
 
 Collocation (Hermite–Simpson, spec 002 §2.7): ``M`` nodes ``t_k = t0 + k τ`` over the horizon ``T``
 (``τ = T / (M - 1)``; "7 nodes, 20 s" gives 6 segments of 3.33 s), states cubic Hermite and controls linear
@@ -17,10 +17,14 @@ between nodes. With ``f_k = f(x_k, u_k)`` the midpoint of segment ``k`` and its 
     ẋ_c = -3/(2τ) (x_k - x_k+1) - (f_k + f_k+1) / 4,       Δ_k = f(x_c, u_c) - ẋ_c = 0
 
 The decision variables are ``x_1..x_M-1`` and ``u_0..u_M-1`` (``x_0`` is the measured state); ``Δ = 0`` are
-equality constraints. Limits at the nodes: ``V_min <= V <= V_max``, ``|a| <= a_max``, ``|ω| <= ω_max`` and
-the lateral acceleration ``|ω| V <= a_lat`` — for a fixed wing ``a_lat = g tan φ_max`` (turn rate
-``ω = g tan φ / V``), for a multirotor its acceleration limit. Solved by SLSQP (scipy) instead of SNOPT,
-with analytic gradients.
+equality constraints. Limits at the nodes (Ross) and, for speed and lateral acceleration, also at the
+midpoints (chosen here: the speed is quadratic between nodes and would otherwise overshoot its band):
+``V_min <= V <= V_max``, ``|a| <= a_max``, ``|ω| <= ω_max`` and the lateral acceleration ``|ω| V <= a_lat`` —
+for a fixed wing ``a_lat = g tan φ_max`` (turn rate ``ω = g tan φ / V``), for a multirotor its acceleration
+limit. Solved by SLSQP (scipy) instead of SNOPT, with analytic gradients, on variables scaled to natural
+units (:meth:`CollocationProblem.variable_scale`). SLSQP's subproblem calls BLAS: an agent process should
+run scipy's OpenBLAS on one thread (``OPENBLAS_NUM_THREADS=1``); its worker threads on a shared machine
+were measured to cost 5-10x per solve.
 
 Objective (replaces Ross (9), whose ``J_tiv`` and weights are not given; form chosen here), integrated by
 Simpson's rule on the nodes and Hermite midpoints, per target ``j`` predicted at ``p_j(t) = m_j + v_j t``,
@@ -37,8 +41,9 @@ directions (an orbit rather than a fly-over); the footprint term keeps the targe
 footprint radius ``r_fp``; ``w_u`` is a small control effort.
 
 Receding horizon (spec 002 §2.7, 2 s update): :class:`RecedingHorizonPlanner` replans every
-``replan_period`` from the measured state, warm-started from its previous plan shifted in time, keeps the
-previous plan when a solve fails, and returns the plan's set-point at the current time.
+``replan_period`` from the measured state, warm-started from its previous plan shifted in time and, as a
+second start, from a circle about the target (the problem is not convex); it keeps the better plan, keeps
+the previous plan when every solve fails, and returns the plan's set-point at the current time.
 """
 
 from __future__ import annotations
