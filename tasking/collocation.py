@@ -559,18 +559,20 @@ class RecedingHorizonPlanner:
     Each replanning solves from the previous plan shifted in time (:func:`shifted_guess`; the first time
     :func:`cold_guess`) and, if ``orbit_start``, also from :func:`orbit_guess`, and keeps the successful
     plan of lower objective: the problem is not convex, and a fixed wing warm-started from its own plans
-    alone can settle on a wide circle with the target outside the footprint (chosen here). When every
+    alone can settle on a wide circle with the target outside the footprint. ``orbit_start=None`` (chosen
+    here) means "if the vehicle cannot hover" (``min_speed > 0``): a hovering vehicle's optimum is to hold
+    still over the target, which the warm start finds alone. When every
     solve fails the previous plan is kept while it still covers the current time. :meth:`setpoint` is the
     call a planner makes every cycle."""
 
     def __init__(self, limits: VehicleLimits, config: PlannerConfig = PlannerConfig(), replan_period: float = 2.0,
-                 wind=(0.0, 0.0), orbit_start: bool = True):
+                 wind=(0.0, 0.0), orbit_start: bool | None = None):
         self.limits, self.config = limits, config
         self.replan_period = _positive("replan_period", replan_period)
         if self.replan_period > config.horizon:
             raise ValueError(f"replan_period ({replan_period}) must not exceed the horizon ({config.horizon})")
         self.wind = as_vector(wind, "wind", 2)
-        self.orbit_start = bool(orbit_start)
+        self.orbit_start = limits.min_speed > 0 if orbit_start is None else bool(orbit_start)
         self.plan: Plan | None = None
         self.solves: list[Plan] = []  # every solve, kept or not (timing and iteration statistics)
         self.replan_times: list[float] = []  # wall time of each replanning (all its solves) [s]
