@@ -29,13 +29,15 @@ Flight quantities along a path flown at constant speed ``v`` (spec 003 §2.2):
     φ̇ = dφ/dτ · v / ‖p'‖                                                                   (Eq. 7)
     a_p = v² / ‖p'‖² · ‖(I - p'p'ᵀ/‖p'‖²) p''‖                                             (Eq. 9)
 
-Bank and roll rate are signed (:func:`signed_curvature`): a right turn (clockwise seen from above,
+``speed`` may be an array broadcasting against ``τ`` (e.g. (S, 1) speeds by (M,) τ values). Bank and roll rate
+are signed (:func:`signed_curvature`): a right turn (clockwise seen from above,
 north -> east) has positive curvature and positive bank (right wing down, FRD roll), as in
 :mod:`agent.vehicles.fixed_wing`.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -114,6 +116,8 @@ class PolynomialPath:
         powers = np.arange(coefficients.shape[2])
         # Derivative coefficients (order r: a_k k!/(k-r)! multiplies s^(k-r)), computed once.
         self._derivatives = [coefficients * _falling_factorial(powers, r) for r in range(MAX_ORDER + 1)]
+        self._exponents = [np.maximum(powers - r, 0).astype(float) for r in range(MAX_ORDER + 1)]
+        self._knot_list = knots.tolist()
 
     @classmethod
     def from_knot_conditions(cls, knots, conditions) -> PolynomialPath:
@@ -133,18 +137,24 @@ class PolynomialPath:
         """``d^order p / dτ^order`` at ``tau`` (scalar or (M,)) -> (3,) or (M, 3)."""
         if order not in range(MAX_ORDER + 1):
             raise ValueError(f"derivative order must be 0..{MAX_ORDER}, got {order}")
+        tau_f = self._knot_list[-1]
+        exponents = self._exponents[order]  # s^(k - r); the factor in the coefficients zeroes k < r
+        if isinstance(tau, float | int | np.floating) and not isinstance(tau, bool):  # one point: plain Python
+            value = float(tau)
+            if not math.isfinite(value) or not -TAU_RTOL * tau_f <= value <= tau_f * (1.0 + TAU_RTOL):
+                raise ValueError(f"tau must be a finite value in [0, tau_f = {tau_f:.6g}], got {tau}")
+            value = min(max(value, 0.0), tau_f)
+            segment = min(bisect.bisect_right(self._knot_list, value) - 1, len(self._knot_list) - 2)
+            return self._derivatives[order][segment] @ (value - self._knot_list[segment]) ** exponents
         t = np.asarray(tau, dtype=float)
         if not np.all(np.isfinite(t)):
             raise ValueError("tau contains non-finite values (NaN or inf)")
-        slack = TAU_RTOL * self.tau_f
-        if np.any(t < -slack) or np.any(t > self.tau_f + slack):
-            raise ValueError(f"tau must lie in [0, tau_f = {self.tau_f:.6g}], got values in [{t.min()}, {t.max()}]")
-        flat = np.clip(t.ravel(), 0.0, self.tau_f)
-        segment = np.clip(np.searchsorted(self.knots, flat, side="right") - 1, 0, self.knots.size - 2)
-        s = flat - self.knots[segment]
-        degree = self.coefficients.shape[2] - 1
-        powers = s[:, None] ** np.maximum(np.arange(degree + 1) - order, 0)  # s^(k - r) (masked below by the factor)
-        value = np.einsum("mid,md->mi", self._derivatives[order][segment], powers)
+        if np.any(t < -TAU_RTOL * tau_f) or np.any(t > tau_f * (1.0 + TAU_RTOL)):
+            raise ValueError(f"tau must lie in [0, tau_f = {tau_f:.6g}], got values in [{t.min()}, {t.max()}]")
+        flat = np.minimum(np.maximum(t.ravel(), 0.0), self.tau_f)
+        segment = np.minimum(np.searchsorted(self.knots, flat, side="right") - 1, self.knots.size - 2)
+        powers = (flat - self.knots[segment])[:, None] ** exponents
+        value = np.sum(self._derivatives[order][segment] * powers[:, None, :], axis=-1)
         return value.reshape(t.shape + (3,))
 
     def position(self, tau) -> np.ndarray:
@@ -191,12 +201,16 @@ def fit_feature(points_ne, down: float = 0.0) -> PolynomialPath:
 
 
 # -- flight quantities (Eqs. 3-9) ------------------------------------------------------------------
-def _check_speed(speed) -> float:
-    if isinstance(speed, bool) or not (isinstance(speed, int | float | np.floating) and math.isfinite(speed)):
+def _check_speed(speed) -> np.ndarray | float:
+    """A positive finite speed (m/s), or an array of them broadcasting against τ (e.g. (S, 1) for S speeds)."""
+    if isinstance(speed, bool):
         raise ValueError(f"speed must be a finite number of m/s, got {speed!r}")
-    if speed <= 0:
+    v = np.asarray(speed, dtype=float)
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"speed must be a finite number of m/s, got {speed!r}")
+    if np.any(v <= 0):
         raise ValueError(f"speed must be positive, got {speed}")
-    return float(speed)
+    return float(v) if v.ndim == 0 else v
 
 
 def _speed_along(path: PolynomialPath, tau) -> np.ndarray:

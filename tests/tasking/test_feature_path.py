@@ -152,9 +152,13 @@ def test_bad_polylines_raise(points, message):
 def test_bad_tau_and_speed_raise():
     path = fit_feature([[0.0, 0.0], [100.0, 0.0]])
     with pytest.raises(ValueError, match="tau must lie in"):
-        path.position(100.5)  # beyond τ_f
+        path.position([100.5])  # beyond τ_f
+    with pytest.raises(ValueError, match="tau must be"):
+        path.position(-1.0)  # before the start
+    with pytest.raises(ValueError, match="finite"):
+        path.position(math.nan)  # NaN τ, one point
     with pytest.raises(ValueError, match="non-finite"):
-        path.position(math.nan)
+        path.position([1.0, math.nan])  # NaN τ in an array
     with pytest.raises(ValueError, match="speed must be positive"):
         bank_angle(path, 10.0, 0.0)  # a stalled aircraft
     with pytest.raises(ValueError, match="order"):
