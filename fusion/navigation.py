@@ -25,15 +25,19 @@ GPS position and velocity updates (``H = I``), Eqs. 26-30 and 39:
 
     ν = ỹ - ŷ,   P^νν = H P Hᵀ + R,   K = P Hᵀ (P^νν)⁻¹,   x̂ += K ν,   P -= K P^νν Kᵀ
 
-each optionally gated by the χ² test of :mod:`fusion.navigation_faults` (Eqs. 40-44). ``𝒫^u`` (Eq. 25) and
-``𝒫^v`` (Eq. 37) share the quaternion block ``𝒫_q`` and are constant (the attitude filter is in steady
-state); their values are tuning choices (:class:`NavigationNoise`). The multi-rate GPS of Eq. 26 is the
+each optionally gated by the χ² test of :mod:`fusion.navigation_faults` (Eqs. 40-44). With several GPS
+receivers, :class:`GpsFaultIsolation` tests each receiver against a filter that never used it (a bank of
+observers, [NOT IN PAPER]), so that a drifting receiver is isolated and the filter continues on the others.
+
+``𝒫^u`` (Eq. 25) and ``𝒫^v`` (Eq. 37) share the quaternion block ``𝒫_q`` and are constant (the attitude filter
+is in steady state); their values are tuning choices (:class:`NavigationNoise`). The multi-rate GPS of Eq. 26 is the
 caller's business: call :meth:`NavigationFilter.predict` at the dead-reckoning rate and the updates whenever a
 GPS datum arrives.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -209,3 +213,59 @@ class NavigationFilter:
     def update_velocity(self, z, R, monitor: SensorMonitor | None = None, t: float = math.nan) -> InnovationTest | None:
         """GPS velocity update (Eq. 39 with Eqs. 27-30), gated like :meth:`update_position`."""
         return self._update("velocity", z, R, monitor, t)
+
+
+class GpsFaultIsolation:
+    """Isolation of faulty GPS receivers by a bank of observers (the "generalised observer scheme", Frank, 1990;
+    [NOT IN PAPER]: the paper's Eq. 44 tests each datum against the one filter that every receiver feeds).
+
+    ``filter`` uses every healthy receiver. For each receiver ``i`` a copy of it uses every healthy receiver
+    *but* ``i``, and receiver ``i``'s datum is tested (Eqs. 43-44) against that copy's prediction. A receiver
+    whose error grows slowly (a drift) therefore cannot drag its own reference along, and a healthy receiver
+    is not blamed for the fix a faulty one pulled away; with a single receiver the reference is dead reckoning.
+    A datum that passes updates the filter and every copy but its own; a
+    :class:`~fusion.navigation_faults.SensorMonitor` per receiver turns failures into isolation (``k`` of the last
+    ``n``), after which the receiver is ignored.
+
+    Limitation: with exactly two receivers a *slow* drift cannot be attributed, since each receiver's reference
+    is fed by the other one and follows it; either may be isolated. One receiver (tested against dead reckoning)
+    or three and more (a majority) isolate the drifting one. A step larger than the gate is isolated in every
+    case, before the filter has moved."""
+
+    def __init__(self, nav: NavigationFilter, receivers, probability: float = 0.99, k: int = 3, n: int = 5):
+        names = list(receivers)
+        if not names or len(set(names)) != len(names):
+            raise ValueError(f"receivers must be distinct names, at least one, got {receivers!r}")
+        self.filter = nav
+        self.monitors = {name: SensorMonitor(name, 3, probability, k, n) for name in names}
+        self._without = {name: copy.deepcopy(nav) for name in names}  # filter i: every receiver but i
+
+    def predict(self, q, speed: float, specific_force, dt: float) -> None:
+        """:meth:`NavigationFilter.predict` on the filter and on every copy."""
+        for nav in (self.filter, *self._without.values()):
+            nav.predict(q, speed, specific_force, dt)
+
+    def update_position(self, receiver: str, z, R, t: float) -> InnovationTest | None:
+        """Test receiver ``receiver``'s fix against the filter that excludes it; use it if it passes and the receiver
+        is healthy. Returns the test, or ``None`` once the receiver is isolated."""
+        if receiver not in self.monitors:
+            raise ValueError(f"unknown receiver {receiver!r}; known: {sorted(self.monitors)}")
+        monitor = self.monitors[receiver]
+        if monitor.isolated:
+            return None
+        reference = self._without[receiver]
+        z = as_vector(z, "GPS position", 3)
+        test = innovation_test(z - reference.position, reference.position_cov + as_pd(R, "GPS position noise R", 3))
+        if monitor.admit(test, t):
+            for name, nav in (("", self.filter), *self._without.items()):
+                if name != receiver:
+                    nav.update_position(z, R)
+        return test
+
+    def update_velocity(self, z, R, monitor: SensorMonitor | None = None, t: float = math.nan) -> InnovationTest | None:
+        """GPS velocity update of the filter (the copies only serve position tests)."""
+        return self.filter.update_velocity(z, R, monitor, t)
+
+    @property
+    def isolated(self) -> list[str]:
+        return [name for name, m in self.monitors.items() if m.isolated]

@@ -14,7 +14,14 @@ from hypothesis import strategies as st
 from scipy.stats import binom, chi2
 
 from agent.vehicles.base import GRAVITY as AGENT_GRAVITY
-from fusion.navigation import GRAVITY, NavigationFilter, NavigationNoise, dcm_from_quaternion, dcm_jacobian
+from fusion.navigation import (
+    GRAVITY,
+    GpsFaultIsolation,
+    NavigationFilter,
+    NavigationNoise,
+    dcm_from_quaternion,
+    dcm_jacobian,
+)
 from fusion.navigation_faults import InnovationTest, SensorMonitor, chi2_gate, innovation_test
 from perception.rotations import quaternion_from_euler, rotation_from_quaternion
 
@@ -190,51 +197,81 @@ def test_false_alarms_on_clean_data_are_at_the_nominal_rate():
     assert not monitor.isolated
 
 
-def run_two_receivers(seed: int, bias_of, gated: bool, steps: int = 400, fault_step: int = 100):
-    """Two GPS receivers at 5 Hz (every other 10 Hz step); receiver A carries ``bias_of(t - t_fault)`` after
-    ``fault_step``. Returns the monitors and the position errors."""
+def run_receivers(seed: int, bias_of, scheme: str, steps: int = 400, fault_step: int = 100, receivers: str = "AB"):
+    """GPS ``receivers`` at 5 Hz (every other 10 Hz step); receiver A carries ``bias_of(t - t_fault)`` from
+    ``fault_step`` on. ``scheme``: "none" (no test), "gate" (Eq. 44 against the one filter, one monitor per
+    receiver) or "bank" (:class:`GpsFaultIsolation`). Returns the monitors and the position errors."""
     rng = np.random.default_rng(seed)
     truth = Truth(rng)
     nav = new_filter(truth, rng)
-    monitors = {name: SensorMonitor(name, 3) for name in ("A", "B")} if gated else {"A": None, "B": None}
+    bank = GpsFaultIsolation(nav, receivers) if scheme == "bank" else None
+    monitors = bank.monitors if bank else {name: SensorMonitor(name, 3) if scheme == "gate" else None
+                                           for name in receivers}
     errors = []
     for k in range(steps):
-        nav.predict(*truth.step(), DT)
+        (bank or nav).predict(*truth.step(), DT)
         t = (k + 1) * DT
         if k % 2 == 1:
             bias = bias_of(t - fault_step * DT) if k >= fault_step else np.zeros(3)
-            nav.update_position(truth.gps(bias)[0], R_GPS, monitors["A"], t)
-            nav.update_position(truth.gps()[0], R_GPS, monitors["B"], t)
+            for name in receivers:
+                z = truth.gps(bias if name == "A" else 0.0)[0]
+                if bank:
+                    bank.update_position(name, z, R_GPS, t)
+                else:
+                    nav.update_position(z, R_GPS, monitors[name], t)
         errors.append(np.linalg.norm(truth.p - nav.position))
     return monitors, np.array(errors)
 
 
-def test_step_bias_is_isolated_within_three_epochs_and_the_filter_continues_on_the_other_receiver():
+@pytest.mark.parametrize("scheme", ["gate", "bank"])
+def test_step_bias_is_isolated_within_three_epochs_and_the_filter_continues_on_the_other_receiver(scheme):
     """A 15 m (10 σ) north step on receiver A: d² ≈ 15²/(1.5² + P) ≫ 11.3, so every faulty datum fails and the
     3-of-5 rule isolates A by its third faulty epoch (two 0.2 s GPS periods after the first). B stays in use."""
     step = lambda _dt: np.array([15.0, 0.0, 0.0])  # noqa: E731
-    for seed in range(5):
-        monitors, errors = run_two_receivers(seed, step, gated=True)
+    for seed in range(3):
+        monitors, errors = run_receivers(seed, step, scheme, steps=200)
         a, b = monitors["A"], monitors["B"]
         first_faulty_epoch = 10.2  # the fault starts at step 100; GPS data at t = 10.2, 10.4, ...
         # at the third faulty epoch at the latest (earlier if a false alarm is still in the 5-datum window)
         assert first_faulty_epoch - 1e-9 <= a.isolated_at <= first_faulty_epoch + 2 * 0.2 + 1e-9
         assert not b.isolated
         assert np.max(errors[110:]) < 3.0  # GPS σ 1.5 m, averaged: the fix never follows the fault
-        _, ungated = run_two_receivers(seed, step, gated=False)
-        assert np.mean(ungated[200:]) > 5.0  # without the test the filter sits about halfway to the bias
+        _, ungated = run_receivers(seed, step, "none", steps=200)
+        assert np.mean(ungated[150:]) > 5.0  # without the test the filter sits about halfway to the bias
 
 
-def test_drift_is_isolated_once_it_exceeds_the_gate():
-    """A 0.5 m/s north drift on A crosses the gate (d² > 11.3, about 5-6 m with S ≈ 2.4 m²) after ~11 s."""
+def test_drift_on_the_only_receiver_is_isolated_against_dead_reckoning():
+    """A 0.5 m/s north drift on the only receiver. Its reference is dead reckoning, whose covariance grows, so the
+    gate is crossed later (16-29 s here) and the filter keeps the part of the drift it took in; but it stops
+    following it, unlike the filter without the test, which ends ~17 m off."""
+    drift = lambda dt: np.array([0.5 * dt, 0.0, 0.0])  # noqa: E731
+    for seed in range(2):
+        monitors, errors = run_receivers(seed, drift, "bank", fault_step=50, receivers="A")
+        _, ungated = run_receivers(seed, drift, "none", fault_step=50, receivers="A")
+        assert monitors["A"].isolated and monitors["A"].isolated_at - 5.0 < 30.0, seed
+        assert np.mean(errors[-50:]) < 0.75 * np.mean(ungated[-50:]) and np.mean(ungated[-50:]) > 15.0, seed
+
+
+def test_drift_is_isolated_by_the_observer_bank_with_three_receivers():
+    """A 0.5 m/s north drift on A of A, B, C. Tested against the filter fed by B and C, A's innovation is the whole
+    drift and crosses the gate (d² > 11.3: about 5-6 m) after roughly 10 s; B and C, each tested against a
+    filter that A feeds only in part, are not blamed, and the fix stays at the healthy receivers' accuracy."""
     drift = lambda dt: np.array([0.5 * dt, 0.0, 0.0])  # noqa: E731
     delays = []
-    for seed in range(5):
-        monitors, errors = run_two_receivers(seed, drift, gated=True, steps=400, fault_step=50)
-        assert monitors["A"].isolated and not monitors["B"].isolated
+    for seed in range(3):
+        monitors, errors = run_receivers(seed, drift, "bank", steps=250, fault_step=50, receivers="ABC")
+        assert monitors["A"].isolated and not (monitors["B"].isolated or monitors["C"].isolated), seed
         delays.append(monitors["A"].isolated_at - 5.0)
-        assert np.max(errors) < 4.0
-    assert 5.0 < np.mean(delays) < 20.0, delays
+        assert np.max(errors[50:]) < 2.5, seed
+    assert 5.0 < np.mean(delays) < 15.0, delays
+
+
+def test_observer_bank_rejects_unknown_receivers():
+    nav = NavigationFilter(np.zeros(3), np.eye(3), np.zeros(3), np.eye(3))
+    with pytest.raises(ValueError, match="distinct"):
+        GpsFaultIsolation(nav, ["A", "A"])  # the same receiver twice
+    with pytest.raises(ValueError, match="unknown receiver"):
+        GpsFaultIsolation(nav, ["A"]).update_position("C", np.zeros(3), R_GPS, 0.0)
 
 
 @pytest.mark.parametrize(
@@ -242,7 +279,7 @@ def test_drift_is_isolated_once_it_exceeds_the_gate():
     [
         (lambda nav: nav.predict([0.0, 0.0, 0.0, math.nan], 20.0, [0, 0, -9.8], 0.1), "non-finite"),  # NaN attitude
         (lambda nav: nav.predict([0.0, 0.0, 0.0, 0.0], 20.0, [0, 0, -9.8], 0.1), "quaternion is zero"),
-        (lambda nav: nav.predict([0.0, 0.0, 0.0, 1.0], 20.0, [0, 0, -9.8], -0.1), "dt must be positive"),
+        (lambda nav: nav.predict([0.0, 0.0, 0.0, 1.0], 20.0, [0, 0, -9.8], -0.1), "dt must be a positive"),
         (lambda nav: nav.predict([0.0, 0.0, 0.0, 1.0], math.inf, [0, 0, -9.8], 0.1), "speed must be finite"),
         (lambda nav: nav.update_position([0.0, 0.0], R_GPS), "length 3"),  # a 2-D GPS fix
         (lambda nav: nav.update_position([0.0, 0.0, math.nan], R_GPS), "non-finite"),  # NaN GPS fix
