@@ -173,24 +173,36 @@ class NavigationFilter:
     def predict(self, q, speed: float, specific_force, dt: float) -> None:
         """Dead-reckon both filters over ``dt`` from the attitude ``q`` (scalar last), the speed ``V`` (m/s) and the
         body specific force ``f^b`` (m/s²): Eqs. 20, 24, 34 and 35 (or 38)."""
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be a positive number of seconds, got {dt}")
-        if not math.isfinite(speed):
-            raise ValueError(f"speed must be finite, got {speed}")
-        q = _quaternion(q)
-        rho, q4 = q[:3], float(q[3])
-        v_body = np.array([float(speed), 0.0, 0.0])  # v^b = [V, 0, 0]
+        q, C = self._attitude(q, dt)
+        F2p = self._predict_position(q, C, speed, dt)
         f_body = as_vector(specific_force, "specific force (body)", 3)
-        C = _dcm(rho, q4)
-        F2p = _jacobian(rho, q4, C, v_body, dt)
-        self.position = self.position + dt * C @ v_body  # p̂ += Δt C_b^n v^b (Eq. 20)
-        self.position_cov = self.position_cov + F2p @ self._P_u @ F2p.T  # Eq. 24
         self.velocity = self.velocity + dt * C @ f_body + np.array([0.0, 0.0, GRAVITY * dt])  # Eq. 34
         if self.velocity_covariance == "eq35":
-            F2v = _jacobian(rho, q4, C, f_body, dt)
+            F2v = _jacobian(q[:3], q[3], C, f_body, dt)
             self.velocity_cov = self.velocity_cov + F2v @ self._P_v @ F2v.T  # Eq. 35
         else:
             self.velocity_cov = F2p @ (self._P_u + dt * self._P_v) @ F2p.T / dt  # Eq. 38
+
+    def predict_position(self, q, speed: float, dt: float) -> None:
+        """Dead-reckon the position filter alone (Eqs. 20 and 24)."""
+        q, C = self._attitude(q, dt)
+        self._predict_position(q, C, speed, dt)
+
+    @staticmethod
+    def _attitude(q, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt}")
+        q = _quaternion(q)
+        return q, _dcm(q[:3], q[3])
+
+    def _predict_position(self, q: np.ndarray, C: np.ndarray, speed: float, dt: float) -> np.ndarray:
+        if not math.isfinite(speed):
+            raise ValueError(f"speed must be finite, got {speed}")
+        v_body = np.array([float(speed), 0.0, 0.0])  # v^b = [V, 0, 0]
+        F2p = _jacobian(q[:3], q[3], C, v_body, dt)
+        self.position = self.position + dt * C @ v_body  # p̂ += Δt C_b^n v^b (Eq. 20)
+        self.position_cov = self.position_cov + F2p @ self._P_u @ F2p.T  # Eq. 24
+        return F2p
 
     def _update(self, which: str, z, R, monitor: SensorMonitor | None, t: float) -> InnovationTest | None:
         if monitor is not None and monitor.isolated:
@@ -241,9 +253,10 @@ class GpsFaultIsolation:
         self._without = {name: copy.deepcopy(nav) for name in names}  # filter i: every receiver but i
 
     def predict(self, q, speed: float, specific_force, dt: float) -> None:
-        """:meth:`NavigationFilter.predict` on the filter and on every copy."""
-        for nav in (self.filter, *self._without.values()):
-            nav.predict(q, speed, specific_force, dt)
+        """:meth:`NavigationFilter.predict` on the filter, and its position part on every copy."""
+        self.filter.predict(q, speed, specific_force, dt)
+        for nav in self._without.values():
+            nav.predict_position(q, speed, dt)
 
     def update_position(self, receiver: str, z, R, t: float) -> InnovationTest | None:
         """Test receiver ``receiver``'s fix against the filter that excludes it; use it if it passes and the receiver

@@ -290,7 +290,7 @@ class PathFollower:
             tau = min(max(tau - (diff @ d1) / slope, 0.0), path.tau_f)
         return tau
 
-    def _abeam(self, position) -> tuple[float, np.ndarray, np.ndarray]:
+    def abeam(self, position) -> tuple[float, np.ndarray, np.ndarray]:
         """``(τ, unit tangent, signed cross-track error)`` at the closest UAV-path point."""
         tau = self.closest_tau(position)
         path = self.flight.uav_path
@@ -301,7 +301,7 @@ class PathFollower:
 
     def cross_track_error(self, position) -> float:
         """Signed horizontal distance from the UAV path (positive: the vehicle is right of it), m."""
-        return self._abeam(position)[2]
+        return self.abeam(position)[2]
 
     def feature_point(self, position) -> np.ndarray:
         """The feature point abeam ``position`` (same τ as the closest UAV-path point), NED."""
@@ -316,7 +316,7 @@ class PathFollower:
         loiter circle around the path's end once it is flown."""
         path, speed = self.flight.uav_path, self.flight.speed
         height = -float(path.position(0.0)[2])  # above the NED origin
-        tau, tangent, e_y = self._abeam(position)
+        tau, tangent, e_y = self.abeam(position)
         if tau >= path.tau_f - self.sample_spacing:
             return orbit_setpoint(path.position(path.tau_f)[:2], self.loiter_radius, height, 1, speed)
         course = math.atan2(tangent[1], tangent[0]) - self.approach_angle * (2 / math.pi) * math.atan(
