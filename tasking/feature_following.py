@@ -290,7 +290,7 @@ class PathFollower:
             tau = min(max(tau - (diff @ d1) / slope, 0.0), path.tau_f)
         return tau
 
-    def abeam(self, position) -> tuple[float, np.ndarray, np.ndarray]:
+    def abeam(self, position) -> tuple[float, np.ndarray, float]:
         """``(τ, unit tangent, signed cross-track error)`` at the closest UAV-path point."""
         tau = self.closest_tau(position)
         path = self.flight.uav_path
