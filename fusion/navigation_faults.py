@@ -92,7 +92,6 @@ class SensorMonitor:
         self._recent: deque[bool] = deque(maxlen=n)
         self.data = 0
         self.rejections = 0
-        self.first_rejection_at: float | None = None
         self.isolated_at: float | None = None
 
     @property
@@ -112,8 +111,6 @@ class SensorMonitor:
         rejected = not test.chi2 <= self.threshold  # χ² > χ²_max (a NaN is rejected too)
         self.data += 1
         self.rejections += rejected
-        if rejected and self.first_rejection_at is None:
-            self.first_rejection_at = float(t)
         self._recent.append(rejected)
         if sum(self._recent) >= self.k:
             self.isolated_at = float(t)
