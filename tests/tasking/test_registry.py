@@ -76,5 +76,5 @@ def test_the_seam_gives_what_the_planners_own_method_gives():
 
 def test_every_registered_planner_reads_a_view_and_lists_its_options():
     for name, entry in PLANNERS.items():
-        assert entry.needs in ("track", "grid"), name
+        assert entry.needs in ("track", "grid", "tasks"), name
         assert entry.options, name
