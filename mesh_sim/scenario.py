@@ -77,20 +77,23 @@ def resolve(name_or_path: str) -> Path:
 
 
 #: The kind a section has when it does not name one.
-_DEFAULT_KINDS = {"sensor": "bearing"}
+_DEFAULT_KINDS = {"sensor": "bearing", "tasking": "placeholder"}
+_KIND_KEYS = {"tasking": "planner"}  # the key that names what a section builds (else "kind")
 
 
 def _same_kind(section: str, current: dict, override: dict) -> bool:
-    if "kind" not in override:
+    key = _KIND_KEYS.get(section, "kind")
+    if key not in override:
         return True
-    return override["kind"] == current.get("kind", _DEFAULT_KINDS.get(section))
+    return override[key] == current.get(key, _DEFAULT_KINDS.get(section))
 
 
 def load(name_or_path: str, **overrides) -> Scenario:
     """Load and validate a scenario. ``overrides`` replace top-level settings (``agents=8``) or merge into
     a section (``tracking={"policy": "ci"}`` changes only the policy). A section override that names a
     different ``kind`` replaces the section (``sensor={"kind": "camera"}`` on a scenario with geometric
-    bearings: the bearing settings do not apply to a camera)."""
+    bearings: the bearing settings do not apply to a camera; likewise ``tasking={"planner": ...}`` naming another
+    planner)."""
     path = resolve(name_or_path)
     raw = read_scenario_file(path)
     for key, value in overrides.items():

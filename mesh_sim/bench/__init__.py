@@ -103,6 +103,29 @@ BENCHMARKS: dict[str, Benchmark] = {
             "bytes/s with and without delta encoding",
         ),
         Benchmark(
+            "tasking",
+            "mesh_sim.bench.tasking",
+            "issue 13's tasking benchmarks in one run: tasking-fleet, tasking-paths, tasking-feature (and their goals)",
+        ),
+        Benchmark(
+            "tasking-fleet",
+            "mesh_sim.bench.tasking_fleet",
+            "default scenario, lockstep: consensus assignment vs the placeholder planner (per-target oracle RMSE, "
+            "fleet ÷ oracle, coverage) and assignment agreement under 30 % loss",
+        ),
+        Benchmark(
+            "tasking-paths",
+            "mesh_sim.bench.tasking_paths",
+            "collocation planner (Ross et al., spec 002): solve time cold/warm vs the 0.5 s budget, stand-off "
+            "information vs a circle and a straight pass; separation layer over crossing swarms of 8 and 16",
+        ),
+        Benchmark(
+            "tasking-feature",
+            "mesh_sim.bench.tasking_feature",
+            "feature following (Lee et al., spec 003): centring error, cross-track error, navigation RMSE with and "
+            "without GPS fault isolation, fault detection delay",
+        ),
+        Benchmark(
             "particles",
             "mesh_sim.bench.particles",
             "particle fusion (Merino Alg. 5.2 GMM and Alg. 5.3 LOP) time and accuracy vs particle count 200/500/2000",
