@@ -63,9 +63,10 @@ class Agent:
         self.exchanges.update((kind, exchange) for kind, exchange in built.items() if exchange is not None)
         self.extra_sensors = [s for exchange in self.exchanges.values() for s in exchange.sensors()]
         hints = {k: v for exchange in self.exchanges.values() for k, v in exchange.planning_hints().items()}
+        top_speed = getattr(self.vehicle, "max_speed", getattr(self.vehicle, "airspeed", None))
         self.planner = planner_from_config(scenario.tasking, PlanningContext(
             index, scenario.agents, scenario.area.as_tuple(), scenario.altitude, seed, frozenset(self.exchanges),
-            hints))
+            hints, scenario.step, top_speed))
         self.kinds = wire.KINDS | frozenset(EXCHANGES)  # the wire's kinds and every registered belief kind
         self._now = 0.0
         self.radio = None if plan is None else RadioTransport(

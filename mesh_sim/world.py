@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 import threading
 import time
@@ -31,6 +32,7 @@ from perception.terrain import terrain_from_config
 
 log = logging.getLogger("skymesh.world")
 
+REPORTED_SEPARATION = 10.0  # m: the separation counted when the scenario sets no [tasking] min_separation
 TRUTH_RATE_HZ = 10.0  # chosen here: agents extrapolate truth at constant velocity between snapshots
 
 
@@ -45,6 +47,7 @@ class World:
         self.in_flight = InFlightOracle(scenario.agent) if scenario.references.in_flight else None
         self.seq = 0
         self.uavs: dict[str, list] = {}  # agent -> last reported position (the radio's range check uses it)
+        self.closest: tuple[float, int, int] = (math.inf, 0, 0)  # (closest pair distance, violations, samples)
         self.now = 0.0
         sc = scenario.agent
         terrain = terrain_from_config(sc.terrain)
@@ -58,6 +61,7 @@ class World:
     def publish_truth(self, t: float) -> None:
         self.now = t
         self.seq += 1
+        self._note_separation()
         payload = {"targets": truth_snapshot(self.scenario.targets, t), "uavs": dict(self.uavs)}
         if self.fire is not None:
             payload["fire"] = self.fire.payload(t)
@@ -88,6 +92,19 @@ class World:
         if self.grid_oracle is not None:
             self.grid_oracle.evaluate(self.now)
 
+    def _note_separation(self) -> None:
+        """The closest two UAVs have come, and how many (sample, pair) were closer than the scenario's
+        ``[tasking] min_separation`` (:data:`REPORTED_SEPARATION` when it sets none)."""
+        if len(self.uavs) < 2:
+            return
+        positions = np.array(list(self.uavs.values()))
+        i, j = np.triu_indices(len(positions), k=1)
+        distances = np.linalg.norm(positions[i] - positions[j], axis=1)
+        limit = self.scenario.agent.tasking.get("min_separation", REPORTED_SEPARATION)
+        closest, violations, samples = self.closest
+        self.closest = (min(closest, float(distances.min())), violations + int(np.count_nonzero(distances < limit)),
+                        samples + 1)
+
     def _note_position(self, env: wire.Envelope) -> None:
         position = np.asarray(env.payload.get("position", ()), float)
         if position.shape == (3,) and np.all(np.isfinite(position)):
@@ -108,6 +125,10 @@ class World:
     def summary(self) -> dict:
         out = {"targets": self.oracle.evaluator.summary(), "late_measurements": self.oracle.late,
                "rejected": self.oracle.rejected}
+        closest, violations, samples = self.closest
+        if samples:
+            out["separation"] = {"closest_m": closest, "violations": violations, "samples": samples,
+                                 "below_m": self.scenario.agent.tasking.get("min_separation", REPORTED_SEPARATION)}
         if self.oracle.imm is not None:
             out["imm_targets"] = self.oracle.imm_evaluator.summary()
         if self.in_flight is not None:

@@ -9,7 +9,10 @@ by consensus (:mod:`tasking.cbba`, carried over the mesh by ``agent.beliefs.assi
 **Serving** (:class:`AssignmentPlanner`): a track task is orbited at ``orbit_radius`` around its fused
 estimate (Andreetto et al.'s circle, spec 004 §2.8; the centre follows the estimate every cycle); a search
 cell is swept by a boustrophedon of ``spacing`` (:func:`tasking.search.lawnmower_waypoints`), resumed where
-it was left; ``home`` flies to the base; with no task the vehicle holds an orbit where it is.
+it was left; ``home`` flies to the base; with no task the vehicle holds an orbit where it is. Whatever the
+task, a peer closer than the separation layer's reach turns the goal into a point along the separated
+velocity (:class:`tasking.separation.SeparationLayer`, thesis 000 §2.9), so that no two vehicles come
+closer than ``min_separation``.
 
 Parameters chosen here (the thesis gives none for the fleet): values 10 (track) and 1 (search), time
 discount λ = 0.95 per second (a target 100 m away at 10 m/s is worth 0.6 of one at hand), one task per
@@ -27,8 +30,10 @@ import numpy as np
 from tasking.base import AssignmentView, VehicleStateLike
 from tasking.orbit import Goal, goto_goal, orbit_setpoint
 from tasking.search import Area, WaypointFollower, check_area, lawnmower_waypoints
+from tasking.separation import SeparationLayer
 from tasking.tasks import Task
 
+SEPARATION_LOOKAHEAD = 1.0  # s: a separated velocity becomes a goal this far ahead
 
 @dataclass(frozen=True)
 class AssignmentConfig:
@@ -44,12 +49,14 @@ class AssignmentConfig:
     stickiness: float = 1.2
     cruise_speed: float = 10.0  # m/s, the travel-time estimate of the scores
     match_radius: float = 25.0  # m: a peer's track task within this of ours is the same task
+    min_separation: float = 10.0  # m: no two vehicles closer (tasking.separation), 0 switches the layer off
     period: float = 1.0  # s between bid broadcasts when nothing changed
 
     def __post_init__(self):
         for f in fields(self):
             value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+            bad = isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value)
+            if bad or value < 0 or (value == 0 and f.name != "min_separation"):
                 raise ValueError(f"tasking.{f.name} must be a positive number, got {value!r}")
         if not 0 < self.discount <= 1:
             raise ValueError(f"tasking.discount (λ) must be in (0, 1], got {self.discount}")
@@ -95,10 +102,16 @@ def fleet_tasks(tracks: Sequence[tuple[Hashable, np.ndarray]], cells: Mapping[st
 
 
 class AssignmentPlanner:
-    """Serve the task the fleet's consensus gave this vehicle (:class:`tasking.base.AssignmentView`)."""
+    """Serve the task the fleet's consensus gave this vehicle (:class:`tasking.base.AssignmentView`), kept
+    ``min_separation`` from its peers by :class:`tasking.separation.SeparationLayer` (acting on the vehicle's
+    velocity, every ``step`` seconds, bounded by the fleet's top speed ``max_speed``)."""
 
-    def __init__(self, config: AssignmentConfig, area: Area, altitude: float):
-        self.config, self.area, self.altitude = config, check_area(area), float(altitude)
+    def __init__(self, config: AssignmentConfig, area: Area, altitude: float, step: float = 0.2,
+                 max_speed: float | None = None):
+        self.config, self.area, self.altitude, self.step = config, check_area(area), float(altitude), float(step)
+        speed = max_speed if max_speed is not None else config.cruise_speed
+        self.layer = SeparationLayer(config.min_separation, speed) if config.min_separation > 0 else None
+        self.separations = 0  # cycles in which the layer changed the goal
         self._sweeps: dict[str, WaypointFollower] = {}
         self._hold: np.ndarray | None = None
         self.mode = "idle"
@@ -106,6 +119,26 @@ class AssignmentPlanner:
 
     def plan(self, state: VehicleStateLike, views: Mapping[str, object]) -> Goal:
         view: AssignmentView = views["tasks"]
+        goal = self._serve(state, view)
+        return goal if self.layer is None else self._separated(state, view, goal)
+
+    def _separated(self, state: VehicleStateLike, view: AssignmentView, goal: Goal) -> Goal:
+        """The goal, or — with a peer within the layer's reach — a point one second along the separated
+        velocity (the layer's guarantee holds for velocities held over ``step``; the vehicle tracks them)."""
+        if not view.peers:
+            return goal
+        own = np.asarray(state.position, float)[:2]
+        peers = np.array(list(view.peers.values()))
+        layer = self.layer
+        reach = max(layer.influence_radius, layer.d_min + 2 * layer.max_speed * self.step)
+        if np.min(np.hypot(*(peers - own).T)) >= reach:
+            return goal
+        velocity = layer.adjust(own, np.asarray(state.velocity, float)[:2], peers, self.step)
+        self.separations += 1
+        speed = float(np.hypot(*velocity))
+        return goto_goal(own + velocity * SEPARATION_LOOKAHEAD, self.altitude, speed if speed > 0.1 else None)
+
+    def _serve(self, state: VehicleStateLike, view: AssignmentView) -> Goal:
         position = np.asarray(state.position, float)
         task = view.task
         self.target_id = None if task is None else task.key

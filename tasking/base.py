@@ -22,9 +22,10 @@ from tasking.tasks import Task
 
 
 class VehicleStateLike(Protocol):
-    """What a planner reads of the vehicle: its NED position [m]."""
+    """What a planner reads of the vehicle: its NED position [m] and velocity [m/s]."""
 
     position: np.ndarray
+    velocity: np.ndarray
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,8 @@ class PlanningContext:
     seed: int
     views: frozenset[str]  # the belief kinds the agent holds (what it can give a planner)
     hints: Mapping[str, object] = field(default_factory=dict)  # from the beliefs, e.g. "detection": (P_D, P_F)
+    step: float = 0.2  # s between planner calls (the agent's cycle)
+    max_speed: float | None = None  # m/s, the vehicle's top speed (None: not known)
 
 
 def _placeholder(options: dict, ctx: PlanningContext) -> Planner:
@@ -45,7 +47,7 @@ def _placeholder(options: dict, ctx: PlanningContext) -> Planner:
 
 
 def _assignment(options: dict, ctx: PlanningContext) -> Planner:
-    return AssignmentPlanner(AssignmentConfig.from_options(options), ctx.area, ctx.altitude)
+    return AssignmentPlanner(AssignmentConfig.from_options(options), ctx.area, ctx.altitude, ctx.step, ctx.max_speed)
 
 
 def _entropy(options: dict, ctx: PlanningContext) -> Planner:

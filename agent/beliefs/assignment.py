@@ -7,7 +7,8 @@ Built when ``[tasking] planner = "assignment"``. Every step, after the other bel
 2. **bundle** (:meth:`tasking.cbba.CBBA.rebuild`): re-bid from the vehicle's current position, scored by
    thesis 000's petal value (4.1) with the range test of the health extension (§2.7.4);
 3. **bids** out (kind ``tasks``): per task the winner and bid this agent knows, with its timestamps and its
-   own position — when they changed, and every ``period`` otherwise;
+   own position — when they changed, every ``period`` otherwise, and every step while a peer is within
+   ``CROWD`` minimum separations (the separation layer of the planner needs fresh positions);
 4. **consensus** on receipt (:meth:`tasking.cbba.CBBA.merge`, Table 1 of Choi et al.).
 
 Task identity across agents: a search cell has the same key everywhere (``search:r:c``); a track is known
@@ -39,6 +40,7 @@ from tasking.cbba import CBBA, Bids, path_score
 from tasking.tasks import Capability, Task
 
 TRACK = "track"
+CROWD = 4.0  # peers closer than this many minimum separations get the position every step
 
 
 class AssignmentExchange:
@@ -85,12 +87,20 @@ class AssignmentExchange:
         entries = [[key if not key.startswith(TRACK) else TRACK, *map(float, self.tasks[key].position), winner, bid]
                    for key, (winner, bid) in sorted(bids.winners.items()) if key in self.tasks]
         digest = tuple((e[0], round(e[1]), round(e[2]), e[3], round(e[4], 3)) for e in entries)
-        if digest == self._sent and t - self._sent_at < self.config.period:
+        if digest == self._sent and t - self._sent_at < self.config.period and not self._crowded():
             return None
         self._sent, self._sent_at = digest, t
         position = self.vehicle.state().position
         return Outgoing({"at": (float(position[0]), float(position[1])), "stamps": dict(bids.stamps),
                          "tasks": entries})
+
+    def _crowded(self) -> bool:
+        """A peer within ``CROWD × min_separation``: the separation layer needs this agent's position every step."""
+        if not self.peers or self.config.min_separation <= 0:
+            return False
+        own = self.vehicle.state().position[:2]
+        nearest = min(float(np.hypot(*(p - own))) for p in self.peers.values())
+        return nearest < CROWD * self.config.min_separation
 
     def sent(self, seq: int, message: Outgoing) -> None:
         return None

@@ -121,8 +121,9 @@ def test_the_wire_schema_rejects_malformed_bids(payload, reason):
 
 
 class _State:
-    def __init__(self, position):
+    def __init__(self, position, velocity=(0.0, 0.0, 0.0)):
         self.position = np.asarray(position, float)
+        self.velocity = np.asarray(velocity, float)
 
 
 def test_the_planner_serves_the_agreed_task():
