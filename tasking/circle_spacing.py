@@ -93,17 +93,23 @@ def spacing_rate(
     return np.clip(rate, 0.0, rate_max)
 
 
-def spacing_setpoint(centre, centre_velocity, theta, rate, radius: float, max_speed: float = MAX_SPEED) -> SetPoint:
+def spacing_setpoint(
+    centre, centre_velocity, theta, rate, radius: float, max_speed: float = MAX_SPEED, lead: float = 0.0
+) -> SetPoint:
     """The set-point on the circle of ``radius`` about ``centre`` at the UAV's phase ``θ_i``, with the
-    feed-forward velocity ``ṗ̂_i + r θ̇_i t̂`` (capped at ``max_speed``): a trajectory follower flying it
-    translates with the centre and rotates by ``θ̇_i Δt`` per step."""
+    feed-forward velocity ``ṗ̂_i + r θ̇_i t̂`` (capped at ``max_speed``). With ``lead > 0`` it is the set-point
+    ``lead`` seconds ahead along that motion (centre ``p̂_i + ṗ̂_i lead``, phase ``θ_i + θ̇_i lead``): what a
+    point-mass follower stepping by ``lead`` aims at, so it stays on the circle instead of on its tangent."""
     _check_radius(radius)
-    centre, centre_velocity = np.asarray(centre, dtype=float), np.asarray(centre_velocity, dtype=float)
-    theta = np.asarray(theta, dtype=float)
-    radial = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
-    tangent = np.stack([-np.sin(theta), np.cos(theta)], axis=-1)
+    if not (math.isfinite(lead) and lead >= 0):
+        raise ValueError(f"lead must be a non-negative time, got {lead}")
+    rate = np.asarray(rate, dtype=float)
+    centre = np.asarray(centre, dtype=float) + lead * np.asarray(centre_velocity, dtype=float)
+    phase = np.asarray(theta, dtype=float) + rate * lead
+    radial = np.stack([np.cos(phase), np.sin(phase)], axis=-1)
+    tangent = np.stack([-np.sin(phase), np.cos(phase)], axis=-1)
     position = centre + radius * radial  # ξ^d = p̂_i + r [cos θ_i, sin θ_i]
-    velocity = centre_velocity + radius * np.asarray(rate, dtype=float)[..., None] * tangent  # ṗ̂_i + r θ̇_i t̂
+    velocity = np.asarray(centre_velocity, dtype=float) + radius * rate[..., None] * tangent  # ṗ̂_i + r θ̇_i t̂
     return SetPoint(position, cap_speed(velocity, max_speed))
 
 

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.sparse.csgraph import connected_components
@@ -125,14 +126,15 @@ def wls_information(measurements, information, valid=None) -> tuple[np.ndarray, 
     if not np.all(np.isfinite(info[mask])):
         raise ValueError("information matrices must be finite")
     P = np.where(mask[..., None, None], info, 0.0)  # P_i(0) = A_iᵀ Σ_i⁻¹ A_i
-    q = np.einsum("...ab,...b->...a", P, np.where(mask[..., None], y, 0.0))  # q_i(0) = A_iᵀ Σ_i⁻¹ y_i
+    q = (P @ np.where(mask[..., None], y, 0.0)[..., None])[..., 0]  # q_i(0) = A_iᵀ Σ_i⁻¹ y_i
     return P, q
 
 
 def consensus_round(weights, P, q) -> tuple[np.ndarray, np.ndarray]:
     """One Xiao–Boyd–Lall iteration: ``P_i ← Σ_j W_ij P_j``, ``q_i ← Σ_j W_ij q_j`` (one message per node)."""
-    W = np.asarray(weights, dtype=float)
-    return np.einsum("...ij,...jab->...iab", W, P), np.einsum("...ij,...ja->...ia", W, q)
+    W, P = np.asarray(weights, dtype=float), np.asarray(P, dtype=float)
+    flat = P.reshape(*P.shape[:-2], -1)  # the matrices as rows, so one batched matmul does Σ_j W_ij P_j
+    return (W @ flat).reshape(P.shape), W @ np.asarray(q, dtype=float)
 
 
 def wls_consensus(weights, P, q, iterations: int, require_connected: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -171,15 +173,15 @@ class DoubleIntegrator:
         if not (math.isfinite(self.sigma_a) and self.sigma_a >= 0):
             raise ValueError(f"sigma_a must be a non-negative acceleration std, got {self.sigma_a}")
 
-    @property
+    @cached_property
     def A(self) -> np.ndarray:
         return ConstantVelocity(spatial_dims=2).transition(self.dt)  # [[I, Δt I], [0, I]]
 
-    @property
+    @cached_property
     def H(self) -> np.ndarray:
         return np.hstack([np.eye(2), np.zeros((2, 2))])  # z = [I 0] x
 
-    @property
+    @cached_property
     def Q(self) -> np.ndarray:
         G = np.vstack([0.5 * self.dt**2 * np.eye(2), self.dt * np.eye(2)])  # G = [Δt²/2 I; Δt I]
         return self.sigma_a**2 * G @ G.T  # Q = σ_a² G Gᵀ
@@ -227,13 +229,13 @@ def kcf_step(
     u = np.where(mask[..., None], z @ HtRinv.T, 0.0)  # u_i = Hᵀ R⁻¹ z_i
     U = np.where(mask[..., None, None], HtRinv @ H, 0.0)  # U_i = Hᵀ R⁻¹ H
     closed = adj + np.eye(adj.shape[-1])
-    y = np.einsum("...ij,...jk->...ik", closed, u)  # y_i = Σ_{j∈N_i∪{i}} u_j
-    S = np.einsum("...ij,...jab->...iab", closed, U)  # S_i = Σ_{j∈N_i∪{i}} U_j
+    y = closed @ u  # y_i = Σ_{j∈N_i∪{i}} u_j
+    S = (closed @ U.reshape(*U.shape[:-2], -1)).reshape(U.shape)  # S_i = Σ_{j∈N_i∪{i}} U_j
     M = np.linalg.inv(np.linalg.inv(P) + S)  # M_i = (P_i⁻¹ + S_i)⁻¹
-    disagreement = np.einsum("...ij,...jk->...ik", adj, x_bar) - adj.sum(axis=-1)[..., None] * x_bar  # Σ_j (x̄_j - x̄_i)
+    disagreement = adj @ x_bar - adj.sum(axis=-1)[..., None] * x_bar  # Σ_{j∈N_i} (x̄_j - x̄_i)
     gamma = epsilon / (1.0 + np.linalg.norm(M, ord="fro", axis=(-2, -1)))  # γ_i = ε / (1 + ‖M_i‖_F)
-    innovation = y - np.einsum("...ab,...b->...a", S, x_bar)  # y_i - S_i x̄_i
-    x_hat = x_bar + np.einsum("...ab,...b->...a", M, innovation + gamma[..., None] * disagreement)
+    innovation = y - (S @ x_bar[..., None])[..., 0]  # y_i - S_i x̄_i
+    x_hat = x_bar + (M @ (innovation + gamma[..., None] * disagreement)[..., None])[..., 0]
     next_cov = A @ M @ A.T + model.Q  # P_i ← A M_i Aᵀ + Q
     next_mean = x_hat @ A.T  # x̄_i ← A x̂_i
     return KCFStep(x_hat, M, next_mean, next_cov)

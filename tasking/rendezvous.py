@@ -19,8 +19,10 @@ information about the target this step (it relays a consensus estimate).
 the consensus WLS of Eq. (4)) as soon as it sees the target or is told a circle → ``TRACK`` (dynamic
 algorithm: WLS → KCF → WLS) after ``approach_readings`` steps with information (the paper's "predefined number
 of sensor readings"; the number is not given, 20 is chosen here). A UAV on an orbit that neither sees nor
-hears keeps its circle and keeps rotating — Corollary 1's sweep brings the target back into view — and falls
-back to ``SEARCH`` after ``lost_patience`` such steps in a row (chosen here: 60).
+hears keeps its circle and keeps rotating — Corollary 1's sweep brings the target back into view. A tracking
+UAV without information for more than ``track_patience`` steps in a row returns to ``APPROACH`` (its filter
+would otherwise extrapolate the centre away at the last velocity; chosen here: 10), and any orbiting UAV falls
+back to ``SEARCH`` after more than ``lost_patience`` such steps (chosen here: 60).
 
 Pure logic on integer arrays of any shape (one entry per UAV, per run), so the simulator updates a whole
 Monte Carlo batch at once.
@@ -54,13 +56,15 @@ class Stage(IntEnum):
 @dataclass(frozen=True)
 class StageRules:
     """``approach_readings``: steps with information before the tracking stage (``None``: never, the static
-    algorithm only); ``lost_patience``: steps without information before an orbiting UAV searches again."""
+    algorithm only); ``track_patience``: steps without information before a tracking UAV returns to the
+    approaching stage; ``lost_patience``: steps without information before an orbiting UAV searches again."""
 
     approach_readings: int | None = 20
+    track_patience: int = 10
     lost_patience: int = 60
 
     def __post_init__(self):
-        for name in ("approach_readings", "lost_patience"):
+        for name in ("approach_readings", "track_patience", "lost_patience"):
             value = getattr(self, name)
             if value is None and name == "approach_readings":
                 continue
@@ -110,9 +114,12 @@ def next_stage(state: StageState, informed, rules: StageRules = StageRules()) ->
     if rules.approach_readings is not None:
         ready = (new_stage == Stage.APPROACH) & (readings >= rules.approach_readings)
         new_stage = np.where(ready, Stage.TRACK, new_stage)  # APPROACH → TRACK
+    fallback = (new_stage == Stage.TRACK) & (missed > rules.track_patience)
+    new_stage = np.where(fallback, Stage.APPROACH, new_stage)  # TRACK → APPROACH
     lost = orbiting & (missed > rules.lost_patience)
     new_stage = np.where(lost, Stage.SEARCH, new_stage)  # orbit → SEARCH
-    return StageState(new_stage.astype(int), np.where(lost, 0, readings), np.where(lost, 0, missed))
+    readings = np.where(lost | fallback, 0, readings)
+    return StageState(new_stage.astype(int), readings, np.where(lost, 0, missed))
 
 
 def _booleans(value, name: str) -> np.ndarray:
