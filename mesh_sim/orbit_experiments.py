@@ -328,15 +328,14 @@ def steady_rmse(result: SimResult, start: float = STEADY_STATE_FROM) -> float:
 
 
 def steady_state_time(result: SimResult, start: float = STEADY_STATE_FROM, window: float = 0.25) -> float:
-    """When the error enters its steady-state envelope for good (the paper gives no definition; chosen here): the
-    first ``t`` after which the trailing ``window``-second average of ``error_rms`` never exceeds its own maximum
-    over ``t > start`` (the envelope of the steady-state oscillation, e.g. the lag along the figure-8)."""
+    """When the error reaches its steady state (the paper gives no definition; chosen here): the first ``t`` at
+    which the trailing ``window``-second average of ``error_rms`` is within its own maximum over ``t > start``
+    (the envelope of the steady-state oscillation, e.g. the lag at the figure-8's fastest point)."""
     rms = error_rms(result)
     width = max(1, int(round(window / (result.times[1] - result.times[0]))))
     smooth = np.convolve(rms, np.ones(width) / width, mode="full")[: rms.size]  # trailing average
     envelope = smooth[result.times > start].max()
-    above = np.flatnonzero(smooth > envelope)
-    return 0.0 if above.size == 0 else float(result.times[above[-1] + 1])
+    return float(result.times[np.flatnonzero(smooth <= envelope)[0]])
 
 
 def final_circle_distances(result: SimResult, tail: float = 0.1) -> np.ndarray:

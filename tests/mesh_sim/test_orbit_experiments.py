@@ -91,6 +91,12 @@ def test_steady_state_metrics_on_a_synthetic_error():
     )
     assert oe.steady_rmse(result) == pytest.approx(0.1)
     assert oe.steady_state_time(result) == pytest.approx(3.0 + 0.25, abs=0.06)  # + the 0.25 s trailing window
+    late_spike = error.copy()
+    late_spike[(times > 10) & (times < 10.5)] = 10.0  # a transient spike after settling does not move it
+    result = oe.SimResult(
+        times, np.stack([late_spike, 0 * error], -1)[None, :, None, :], result.circle_distance, result.stage
+    )
+    assert oe.steady_state_time(result) == pytest.approx(3.0 + 0.25, abs=0.06)
 
 
 def test_bad_config():
