@@ -1,0 +1,31 @@
+"""Smoke test of the orbit benchmark (spec 004 reproductions): keys, finite numbers, and the report."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from mesh_sim.bench import tasking_orbit
+
+pytestmark = pytest.mark.slow  # benchmark run
+
+
+def test_quick_run_is_well_formed(printed):
+    result = tasking_orbit.run(quick=True, repeats=1)
+    assert result["benchmark"] == tasking_orbit.NAME
+    assert {r["experiment"] for r in result["rows"]} == {"E1", "E2", "E3"}
+    for row in result["rows"]:
+        for key, value in row.items():
+            if isinstance(value, float) and key not in (
+                "sigma_a",
+                "rendezvous_time_median_s",
+                "rmse_m",
+                "steady_state_s",
+            ):
+                assert math.isfinite(value), (key, row)
+    assert result["goals"] and all({"name", "target", "measured", "met"} <= set(g) for g in result["goals"])
+    assert all(isinstance(g["met"], bool) for g in result["goals"])
+    text = printed(tasking_orbit, result)
+    assert "E1 figure-8" in text and "Goals" in text and "kappa = 6.0" in text
+    assert all(math.isfinite(r["rmse_m"]) for r in result["rows"] if r.get("lost_runs") == 0 and "rmse_m" in r)

@@ -1,0 +1,106 @@
+"""The Andreetto et al. 2018 simulator: Theorem 1, Corollary 1, rendezvous, truth models and metrics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mesh_sim import orbit_experiments as oe
+from tasking.rendezvous import Stage
+
+NOISELESS = dict(sigma_bearing=0.0, sigma_yaw=0.0, sigma_gps=0.0)
+
+
+def _final_errors(result):
+    return np.linalg.norm(result.centre_error[:, -1], axis=-1)
+
+
+def test_theorem1_static_target_three_uavs_without_fov_limits_converge():
+    """004 Theorem 1: n = 3, fixed target, no FOV limits, noise-free: every centre → the target."""
+    config = oe.OrbitConfig(n=3, duration=20.0, eta_max=math.pi, **NOISELESS)
+    result = oe.run_tracking(config, "static", runs=4, seed=1)
+    assert _final_errors(result).max() < 1e-6
+
+
+def test_corollary1_one_rotating_uav_converges_and_a_still_one_does_not():
+    """004 Corollary 1: one UAV moving on its circle (31 measures per turn at dt = 1 s) localises a fixed target
+    despite the 30° FOV; with (almost) no rotation it is left blind once the centre sits on its line of sight.
+
+    Each step removes the error across the current line of sight only, so the contraction per turn depends on
+    how far apart the measures are: at dt = 0.05 s and 0.2 rad/s (0.01 rad per step) it is e^(-πδ) ≈ 0.97 per
+    turn; at 0.2 rad per step it is ≈ 0.5, which this test uses to stay short."""
+    config = oe.OrbitConfig(n=1, dt=1.0, radius=15.0, duration=400.0, initial_offset=10.0, **NOISELESS)
+    rotating = oe.run_tracking(config, "static", runs=4, seed=2)
+    assert _final_errors(rotating).max() < 0.1
+    still = oe.run_tracking(oe.replace(config, omega_0=1e-9, k_theta=0.0), "static", runs=4, seed=2)
+    assert _final_errors(still).min() > 1.0
+
+
+def test_noisy_static_error_matches_the_closed_form():
+    """The stationary RMSE of e ← (1 - Λ/2) e + noise, r σ_η sqrt(Λ / (n (1 - Λ/4))), within 25 %
+    (f = 3 rounds on a complete graph are exact; the spacing is not perfectly equal)."""
+    config = oe.OrbitConfig(n=5, duration=40.0)
+    rmse = oe.steady_rmse(oe.run_tracking(config, "static", runs=6, seed=3))
+    expected = config.radius * config.sigma_bearing * math.sqrt(config.Lambda / (5 * (1 - config.Lambda / 4)))
+    assert rmse == pytest.approx(expected, rel=0.25)
+
+
+def test_rendezvous_static_target_every_uav_reaches_the_circle():
+    """E3 (004 §6.2): searching UAVs, dt = 1 s, r = 15 m, R_max = C_r = 30 m: every UAV ends on the target circle."""
+    result = oe.run_rendezvous(oe.rendezvous_config(duration=400.0), runs=3, seed=3)
+    assert oe.final_circle_distances(result).max() < 0.5
+    assert np.all(result.stage[:, -1] != Stage.SEARCH)
+    assert np.all(np.isfinite(oe.rendezvous_time(result)))
+
+
+def test_see_only_uav_converges_alone():
+    """Case 2 of 004 §2.9: with no radio (C_r ~ 0) each UAV that sees the target still converges on its own."""
+    config = oe.OrbitConfig(n=3, dt=1.0, radius=15.0, duration=400.0, comm_range=1e-6, initial_offset=10.0, **NOISELESS)
+    assert _final_errors(oe.run_tracking(config, "static", runs=2, seed=4)).max() < 0.05
+
+
+def test_dynamic_tracks_a_constant_velocity_target_better_than_static():
+    """004 §5.2: at v = 8 m/s the DKF beats the static algorithm (it removes the lag)."""
+    static = oe.run_tracking(oe.OrbitConfig(n=5, duration=30.0), "cv", runs=3, seed=5, speed=8.0)
+    dynamic = oe.run_tracking(oe.OrbitConfig(n=5, duration=30.0, dynamic=True), "cv", runs=3, seed=5, speed=8.0)
+    assert oe.steady_rmse(dynamic) < 0.7 * oe.steady_rmse(static)
+
+
+def test_target_paths():
+    times = np.arange(0, 10, 0.5)
+    eight = oe.target_paths("figure8", 2, times)
+    expected = 20.0 * np.stack([np.sin(4 * np.pi * 0.0285 * times), np.sin(2 * np.pi * 0.0285 * times)], -1)
+    np.testing.assert_allclose(eight[1], expected, atol=1e-12)
+    np.testing.assert_allclose(oe.target_paths("cv", 1, times, speed=3.0)[0], np.outer(times, [3.0, 3.0]))
+    singer = oe.target_paths("singer", 2, times, seed=1)
+    assert singer.shape == (2, times.size, 2) and not np.allclose(singer[0], singer[1])
+    with pytest.raises(ValueError, match="kind"):
+        oe.target_paths("zigzag", 1, times)  # unknown target model
+
+
+def test_steady_state_metrics_on_a_synthetic_error():
+    times = np.arange(0, 30, 0.05)
+    error = np.where(times < 3.0, 10.0, 0.1)  # settles at t = 3 s
+    result = oe.SimResult(
+        times,
+        np.stack([error, 0 * error], -1)[None, :, None, :],
+        np.zeros((1, times.size, 1)),
+        np.zeros((1, times.size, 1), dtype=np.int8),
+    )
+    assert oe.steady_rmse(result) == pytest.approx(0.1)
+    assert oe.steady_state_time(result) == pytest.approx(3.0 + 0.25, abs=0.06)  # + the 0.25 s trailing window
+    late_spike = error.copy()
+    late_spike[(times > 10) & (times < 10.5)] = 10.0  # a transient spike after settling does not move it
+    result = oe.SimResult(
+        times, np.stack([late_spike, 0 * error], -1)[None, :, None, :], result.circle_distance, result.stage
+    )
+    assert oe.steady_state_time(result) == pytest.approx(3.0 + 0.25, abs=0.06)
+
+
+def test_bad_config():
+    with pytest.raises(ValueError, match="n must"):
+        oe.OrbitConfig(n=0)  # no UAVs
+    with pytest.raises(ValueError, match="radius"):
+        oe.OrbitConfig(radius=-15.0)  # negative radius
