@@ -105,13 +105,20 @@ BENCHMARKS: dict[str, Benchmark] = {
         Benchmark(
             "tasking",
             "mesh_sim.bench.tasking",
-            "issue 13's tasking benchmarks in one run: tasking-fleet, tasking-paths, tasking-feature (and their goals)",
+            "issue 13's tasking benchmarks in one run: tasking-fleet, tasking-orbit, tasking-paths, tasking-feature "
+            "(and their goals)",
         ),
         Benchmark(
             "tasking-fleet",
             "mesh_sim.bench.tasking_fleet",
             "default scenario, lockstep: consensus assignment vs the placeholder planner (per-target oracle RMSE, "
             "fleet ÷ oracle, coverage) and assignment agreement under 30 % loss",
+        ),
+        Benchmark(
+            "tasking-orbit",
+            "mesh_sim.bench.tasking_orbit",
+            "coordinated orbits (Andreetto et al., spec 004): E1 RMSE and steady-state time vs n (static vs dynamic), "
+            "E2 constant-velocity target, E3 rendezvous — beside the paper's figures",
         ),
         Benchmark(
             "tasking-paths",
