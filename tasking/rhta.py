@@ -52,6 +52,7 @@ per petal — too slow for thousands of petals per replanning of a 20-vehicle fl
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Hashable, Mapping, Sequence
@@ -79,30 +80,32 @@ def _check_parameters(horizon: int, discount: float) -> None:
         raise ValueError(f"time discount λ must be in (0, 1], got {discount}")
 
 
+@functools.lru_cache(maxsize=64)
 def enumerate_petals(n_tasks: int, horizon: int) -> np.ndarray:
     """All ordered sequences of 1..``horizon`` distinct task indices out of ``n_tasks``: shape
-    ``(P, horizon)``, padded with ``-1``; shorter petals first, each length in lexicographic order."""
+    ``(P, horizon)``, padded with ``-1``; shorter petals first, each length in lexicographic order.
+    (Cached: the array is read-only.)"""
     _check_parameters(horizon, 1.0)
     rows = [
         petal + (EMPTY,) * (horizon - length)
         for length in range(1, min(horizon, n_tasks) + 1)
         for petal in itertools.permutations(range(n_tasks), length)
     ]
-    return np.array(rows, dtype=int).reshape(-1, horizon)
+    petals = np.array(rows, dtype=int).reshape(-1, horizon)
+    petals.flags.writeable = False
+    return petals
 
 
 @dataclass(frozen=True)
 class PetalTable:
-    """The petals of one iteration: ``petals`` ``(P, n_c)`` task indices (``-1`` padded), ``values``
-    ``(N_v, P)`` the ``S_vp`` (4.1), ``feasible`` ``(N_v, P)`` the petals that pass the range test."""
+    """The petals of one iteration: ``petals`` ``(P, n_c)`` task indices (``-1`` padded), ``visits``
+    ``(P, N_w)`` the incidence ``A_pi`` of (4.3) (petal ``p`` visits task ``i``), ``values`` ``(N_v, P)``
+    the ``S_vp`` (4.1), ``feasible`` ``(N_v, P)`` the petals that pass the range test."""
 
     petals: np.ndarray
+    visits: np.ndarray
     values: np.ndarray
     feasible: np.ndarray
-
-    def task_masks(self) -> list[int]:
-        """Each petal's tasks as a bit mask (bit ``i``: task ``i``), for the disjointness test (4.3)."""
-        return [sum(1 << int(i) for i in row if i != EMPTY) for row in self.petals]
 
 
 def petal_table(
@@ -116,10 +119,11 @@ def petal_table(
     vehicle; ``elapsed`` holds each vehicle's virtual time ``t_v`` (default 0)."""
     _check_parameters(horizon, discount)
     petals = enumerate_petals(len(tasks), horizon)
+    visits = np.any(petals[:, :, None] == np.arange(len(tasks)), axis=1)  # A_pi
     n_vehicles = len(vehicles)
     if len(petals) == 0 or n_vehicles == 0:
         empty = np.zeros((n_vehicles, len(petals)))
-        return PetalTable(petals, empty, empty.astype(bool))
+        return PetalTable(petals, visits, empty, empty.astype(bool))
     elapsed = np.zeros(n_vehicles) if elapsed is None else np.asarray(elapsed, dtype=float)
     where = np.array([task.position for task in tasks])
     dwell = np.array([task.duration for task in tasks])
@@ -131,24 +135,31 @@ def petal_table(
     quality = np.array([vehicle.quality for vehicle in vehicles])
     reach = np.array([math.inf if vehicle.reach is None else vehicle.reach for vehicle in vehicles])
 
-    used = petals != EMPTY  # (P, n_c)
-    index = np.where(used, petals, 0)
-    between = np.hypot(*(where[:, None, :] - where[None, :, :]).transpose(2, 0, 1))  # d(w_i, w_j)
-    inner = np.zeros(petals.shape)
-    inner[:, 1:] = np.where(used[:, 1:], between[index[:, :-1], index[:, 1:]], 0.0)  # d(w_{j-1}, w_j)
-    path = np.cumsum(inner, axis=1)  # distance from w_1 to w_j along the petal
-    first = np.hypot(*(position[:, None, :] - where[None, petals[:, 0], :]).transpose(2, 0, 1))  # d(v, w_1)
-    stay = np.cumsum(np.where(used, dwell[index], 0.0), axis=1)
-    times = (first[:, :, None] + path[None]) / speed[:, None, None] + stay[None]  # T_i
-    worth = np.where(used, value[index], 0.0)[None] * np.where(camera[index] & used, quality[:, None, None], 1.0)
-    values = discount ** elapsed[:, None] * np.sum(discount**times * worth, axis=2)  # λ^{t_v} Σ λ^{T_i} s_{w_i}
+    # A padding task (index m) with no value, no dwell and legs of length 0 stands for the empty slots.
+    padded = np.where(petals == EMPTY, len(tasks), petals)  # (P, n_c)
+    between = np.zeros((len(tasks) + 1, len(tasks) + 1))
+    between[:-1, :-1] = _distances(where, where)  # d(w_i, w_j)
+    path = np.zeros(petals.shape)
+    np.cumsum(between[padded[:, :-1], padded[:, 1:]], axis=1, out=path[:, 1:])  # w_1 -> w_j along the petal
+    stay = np.cumsum(np.append(dwell, 0.0)[padded], axis=1)  # dwell up to and including w_j
+    first = _distances(position, where)[:, petals[:, 0]]  # d(v, w_1), (N_v, P)
+    times = (first[:, :, None] + path) * (1.0 / speed)[:, None, None] + stay  # T_i
+    scaled = value * np.where(camera, quality[:, None], 1.0)  # s_w, times q for camera tasks, (N_v, m)
+    worth = np.pad(scaled, ((0, 0), (0, 1)))[:, padded]
+    np.power(discount, times, out=times)
+    values = discount ** elapsed[:, None] * np.einsum("vpi,vpi->vp", times, worth)  # λ^{t_v} Σ λ^{T_i} s_{w_i}
 
-    length = used.sum(axis=1) - 1
-    last = index[np.arange(len(petals)), length]
-    home = np.hypot(*(where[None, last, :] - base[:, None, :]).transpose(2, 0, 1))  # d(w_last, x_base)
-    flown = first + path[np.arange(len(petals)), length][None] + speed[:, None] * stay[:, -1][None]  # L + dwell
+    rows = np.arange(len(petals))
+    last = (petals != EMPTY).sum(axis=1) - 1
+    home = _distances(base, where)[:, petals[rows, last]]  # d(w_last, x_base), (N_v, P)
+    flown = first + path[rows, last] + speed[:, None] * stay[:, -1]  # L, plus the dwell flown at v_max
     feasible = flown + home <= reach[:, None]  # L + d(w_last, x_base) ≤ r
-    return PetalTable(petals, values, feasible)
+    return PetalTable(petals, visits, values, feasible)
+
+
+def _distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Euclidean distances between the rows of ``a`` and of ``b``, shape ``(len(a), len(b))``."""
+    return np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1])
 
 
 def selection_value(table: PetalTable, choice: Sequence[int]) -> float:
@@ -160,25 +171,23 @@ def select_greedy(table: PetalTable) -> np.ndarray:
     """Best petal first: the most valuable feasible petal over all vehicles, then the best of those left
     that share neither vehicle nor task with it, ... (ties: lower vehicle, then earlier petal). Returns
     the chosen petal index per vehicle (``-1``: empty). ``J ≥ J_opt / (n_c + 1)``."""
-    n_vehicles, n_petals = table.values.shape
-    choice = np.full(n_vehicles, EMPTY)
-    vehicle, petal = np.nonzero(table.feasible & (table.values > 0))
-    order = np.lexsort((petal, vehicle, -table.values[vehicle, petal]))
-    masks = table.task_masks()
-    taken = 0
-    for k in order:
-        v, p = vehicle[k], petal[k]
-        if choice[v] == EMPTY and not masks[p] & taken:
-            choice[v], taken = p, taken | masks[p]
+    choice = np.full(table.values.shape[0], EMPTY)
+    visits = table.visits
+    open_values = np.where(table.feasible & (table.values > 0), table.values, -np.inf)
+    while open_values.size:
+        v, p = np.unravel_index(np.argmax(open_values), open_values.shape)  # first maximum in (v, p) order
+        if open_values[v, p] == -np.inf:
+            break
+        choice[v] = p
+        open_values[v] = -np.inf  # (4.4): one petal for this vehicle
+        open_values[:, np.any(visits[:, visits[p]], axis=1)] = -np.inf  # (4.3): its tasks are taken
     return choice
-
-
 def select_exact(table: PetalTable) -> np.ndarray:
     """The optimum of (4.2)-(4.4) by depth-first enumeration over the vehicles, cut when the current value
     plus every remaining vehicle's best petal cannot beat the best found; the first optimum in the
     tie-breaking order is kept. Exponential: for small instances."""
     n_vehicles = table.values.shape[0]
-    masks = table.task_masks()
+    masks = [sum(1 << int(i) for i in np.flatnonzero(row)) for row in table.visits]  # task sets as bit masks
     options = []  # per vehicle: feasible petals, best first (ties: earlier petal)
     for v in range(n_vehicles):
         (petals,) = np.nonzero(table.feasible[v] & (table.values[v] > 0))
@@ -227,9 +236,13 @@ def rhta(
     horizon: int = DEFAULT_HORIZON,
     discount: float = DEFAULT_DISCOUNT,
     solver: str = "greedy",
+    first_only: bool = False,
 ) -> dict[Hashable, Plan]:
     """Assign the active ``tasks`` to ``vehicles`` by RHTA (module docstring, steps 1-5); a vehicle with
-    a range (``reach``) whose petals are all pruned at the first iteration is sent home."""
+    a range (``reach``) whose petals are all pruned at the first iteration is sent home.
+
+    ``first_only``: stop iterating once every vehicle has its first task (or can take none), which is all
+    a receding-horizon executor flies before re-planning; those first tasks are the full plan's."""
     _check_parameters(horizon, discount)
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
@@ -239,30 +252,33 @@ def rhta(
     select = select_exact if solver == "exact" else select_greedy
     names = _by_key(vehicles)
     by_key = {task.key: task for task in tasks}
-    pending = [by_key[key] for key in _by_key(by_key)]
+    tasks = [by_key[key] for key in _by_key(by_key)]
     state = [vehicles[name] for name in names]  # virtual states
     elapsed = np.zeros(len(names))
     plans: list[list[Hashable]] = [[] for _ in names]
-    home = [False] * len(names)
-    first = True
-    while pending:
-        table = petal_table(state, pending, horizon, discount, elapsed)
-        if first:
-            home = [vehicle.reach is not None and not table.feasible[v].any() for v, vehicle in enumerate(state)]
-            first = False
+    # One table over all tasks; a committed task closes its petals, a moved vehicle gets its row again.
+    table = petal_table(state, tasks, horizon, discount)
+    home = [vehicle.reach is not None and not table.feasible[v].any() for v, vehicle in enumerate(state)]
+    assigned = np.zeros(len(tasks), dtype=bool)
+    while not assigned.all():
+        table = replace(table, feasible=table.feasible & ~table.visits[:, assigned].any(axis=1))
         choice = select(table)
-        if np.all(choice == EMPTY):
+        moved = np.flatnonzero(choice != EMPTY)
+        if moved.size == 0:
             break
-        for v in np.flatnonzero(choice != EMPTY):
-            task = pending[table.petals[choice[v], 0]]
-            vehicle = state[v]
+        for v in moved:
+            first = table.petals[choice[v], 0]
+            task, vehicle = tasks[first], state[v]
             leg = float(np.hypot(*(task.position - vehicle.position)))
             elapsed[v] += leg / vehicle.speed + task.duration  # t_v <- t_v + d(v, w_1)/v_max + dwell
             reach = None if vehicle.reach is None else max(vehicle.reach - leg - vehicle.speed * task.duration, 0.0)
             state[v] = replace(vehicle, position=task.position, reach=reach)
             plans[v].append(task.key)
-        committed = {plans[v][-1] for v in np.flatnonzero(choice != EMPTY)}
-        pending = [task for task in pending if task.key not in committed]
-    if first:  # no task at all: every vehicle with a range model has nothing within reach
-        home = [vehicle.reach is not None for vehicle in state]
+            assigned[first] = True
+        if first_only and all(plans[v] or not table.feasible[v].any() for v in range(len(names))):
+            break
+        rows = petal_table([state[v] for v in moved], tasks, horizon, discount, elapsed[moved])
+        values, feasible = table.values.copy(), table.feasible.copy()
+        values[moved], feasible[moved] = rows.values, rows.feasible
+        table = replace(table, values=values, feasible=feasible)
     return {name: Plan(tuple(plans[v]), home[v]) for v, name in enumerate(names)}
