@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tasking.health import HealthModel, VehicleHealth
-from tasking.rhta import DEFAULT_DISCOUNT, DEFAULT_HORIZON, rhta
+from tasking.rhta import DEFAULT_DISCOUNT, DEFAULT_HORIZON, check_parameters, rhta
 from tasking.tasks import Capability, Task
 
 __all__ = ["MODES", "MissionConfig", "MissionResult", "loiter_tasks", "monte_carlo", "random_arrivals",
@@ -93,13 +93,14 @@ class MissionConfig:
             raise ValueError(f"value_range must be 0 < low ≤ high, got {self.value_range}")
         if self.loiter_grid < 1:
             raise ValueError(f"loiter_grid must be ≥ 1, got {self.loiter_grid}")
+        check_parameters(self.horizon, self.discount)
 
 
 @dataclass
 class MissionResult:
     """One run: ``service_times`` [s] of the served tasks, vehicles ``lost``, ``failures``, tasks
-    ``arrived`` and left ``unserved``; ``losses`` and ``failure_log`` hold ``(time, vehicle, distance from
-    base)`` of each event."""
+    ``arrived`` and left ``unserved``, ``airborne`` vehicle-seconds of flight; ``losses`` and
+    ``failure_log`` hold ``(time, vehicle, distance from base)`` of each event."""
 
     mode: str
     service_times: np.ndarray
@@ -107,6 +108,7 @@ class MissionResult:
     failures: int
     arrived: int
     unserved: int
+    airborne: float
     losses: list[tuple[float, int, float]]
     failure_log: list[tuple[float, int, float]]
 
@@ -158,6 +160,7 @@ class _Mission:
         self.service_times: list[float] = []
         self.losses: list[tuple[float, int, float]] = []
         self.failure_log: list[tuple[float, int, float]] = []
+        self.airborne = 0.0
 
     # -- planning ------------------------------------------------------------------------------------------
     def _plan(self) -> None:
@@ -208,6 +211,7 @@ class _Mission:
             health.step(dt, flying=False)
             return
         self.status[v] = FLYING
+        self.airborne += dt
         was_failed = health.failed
         arrived = False
         if target is not None:
@@ -261,6 +265,7 @@ class _Mission:
             failures=sum(health.failures for health in self.health),
             arrived=len(self.arrivals) - len(pending),
             unserved=len(self.active),
+            airborne=self.airborne,
             losses=self.losses,
             failure_log=self.failure_log,
         )

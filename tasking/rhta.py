@@ -63,8 +63,8 @@ import numpy as np
 from tasking.tasks import CAMERA_TASKS, Capability, Task
 
 __all__ = [
-    "DEFAULT_DISCOUNT", "DEFAULT_HORIZON", "SOLVERS", "PetalTable", "Plan", "enumerate_petals", "petal_table",
-    "rhta", "select_exact", "select_greedy", "selection_value",
+    "DEFAULT_DISCOUNT", "DEFAULT_HORIZON", "SOLVERS", "PetalTable", "Plan", "check_parameters", "enumerate_petals",
+    "petal_table", "rhta", "select_exact", "select_greedy", "selection_value",
 ]
 
 DEFAULT_HORIZON = 2  # n_c, chosen here
@@ -73,7 +73,8 @@ SOLVERS = ("greedy", "exact")
 EMPTY = -1  # the empty petal (S = 0) in a selection; also the padding of a petal's task indices
 
 
-def _check_parameters(horizon: int, discount: float) -> None:
+def check_parameters(horizon: int, discount: float) -> None:
+    """Raise ``ValueError`` unless ``n_c`` is an integer ≥ 1 and ``0 < λ ≤ 1``."""
     if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 1:
         raise ValueError(f"petal length n_c must be an integer ≥ 1, got {horizon!r}")
     if not 0.0 < discount <= 1.0:
@@ -85,7 +86,7 @@ def enumerate_petals(n_tasks: int, horizon: int) -> np.ndarray:
     """All ordered sequences of 1..``horizon`` distinct task indices out of ``n_tasks``: shape
     ``(P, horizon)``, padded with ``-1``; shorter petals first, each length in lexicographic order.
     (Cached: the array is read-only.)"""
-    _check_parameters(horizon, 1.0)
+    check_parameters(horizon, 1.0)
     rows = [
         petal + (EMPTY,) * (horizon - length)
         for length in range(1, min(horizon, n_tasks) + 1)
@@ -117,7 +118,7 @@ def petal_table(
 ) -> PetalTable:
     """Values ``S_vp = λ^{t_v} Σ λ^{T_i} s_{w_i}`` (4.1) and range tests (§2.7.4) of every petal of every
     vehicle; ``elapsed`` holds each vehicle's virtual time ``t_v`` (default 0)."""
-    _check_parameters(horizon, discount)
+    check_parameters(horizon, discount)
     petals = enumerate_petals(len(tasks), horizon)
     visits = np.any(petals[:, :, None] == np.arange(len(tasks)), axis=1)  # A_pi
     n_vehicles = len(vehicles)
@@ -243,7 +244,7 @@ def rhta(
 
     ``first_only``: stop iterating once every vehicle has its first task (or can take none), which is all
     a receding-horizon executor flies before re-planning; those first tasks are the full plan's."""
-    _check_parameters(horizon, discount)
+    check_parameters(horizon, discount)
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     keys = [task.key for task in tasks]
