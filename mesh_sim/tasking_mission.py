@@ -6,37 +6,42 @@ service time (arrival -> a vehicle reaches the task) and the vehicles lost (fuel
 Published: nominal RHTA median 18.8 s, mean 21.3 s, 5 of 20 vehicles lost; the extended RHTA about 18 %
 faster (median 14.0 s) with far fewer losses.
 
-The world (all of it chosen here; the thesis gives none of these numbers, spec 000 §4.3 and §3):
+The world (all of it chosen here; the thesis gives none of these numbers, spec 000 §4.3 and §3). The
+values put the nominal case near the thesis' nominal figures (:mod:`mesh_sim.bench.tasking_health`
+measures it):
 
 * the base at the origin; tasks in the square ``[0, area] × [-area/2, area/2]`` north of it
-  (north, east) [m]; ``area`` = 500 m;
-* ``vehicles`` = 20 at base, first-order flight at ``speed`` = 5 m/s straight to their goal
-  (:mod:`tasking.tasks`), hovering when idle; a time step ``dt`` = 0.2 s;
+  (north, east) [m]; ``area`` = 400 m;
+* ``vehicles`` = 20 at base, first-order flight at ``speed`` = v_max = 5 m/s straight to their goal
+  (spec 000 §2.7.2), hovering when idle; time step ``dt`` = 0.2 s;
 * tasks arrive as a Poisson process of ``arrival_rate`` = 0.2 per second at uniform positions, with a value
-  ``s ~ U(value_range)`` = U(1, 2), no dwell; a task is served when a vehicle reaches it;
-* fuel and failures (:class:`tasking.health.HealthModel`): full tank 1, ``k_fuel`` = 1/300 per second
-  (5 min of flight, 1.5 km of range), ``k_fuel,failure`` = 4 ``k_fuel``, ``p_f`` = 1/1000 per second of
-  flight, 20 s on the ground to refuel and repair; a vehicle that runs dry in the air is lost and its task
-  goes back into the pool;
-* RHTA (:func:`tasking.rhta.rhta`, greedy selection) with ``n_c`` = 2, ``λ`` = 0.95 per second, re-run when a
-  task arrives or is served, a vehicle is lost or back from refuelling (and, in the extended mode, fails),
-  and every ``replan_period`` = 2 s otherwise (receding horizon: each vehicle flies to the first task of
-  its plan);
+  ``s ~ U(value_range)`` = U(1, 2) and no dwell; a task is served when a vehicle reaches it;
+* fuel and failures (:class:`tasking.health.HealthModel` defaults): full tank 1, ``k_fuel`` = 1/600 per
+  second (10 min, 3 km on a full tank), ``k_fuel,failure`` = 2 ``k_fuel``, ``p_f`` = 1/600 per second of
+  flight, 20 s on the ground to refuel and repair; a vehicle that runs dry in the air is lost and its
+  task goes back into the pool;
+* RHTA (:func:`tasking.rhta.rhta`, greedy selection, ``first_only``) with ``n_c`` = 2 and ``λ`` = 0.98 per
+  second (trips last 10-100 s: a steeper discount would leave far tasks waiting), re-run every
+  ``replan_period`` = 1 s on the current state (receding horizon: each vehicle flies to the first task of
+  its plan; arrivals, services, failures, losses and refuels are taken into account at the next period);
+  the range given to RHTA is ``r`` less ``v_max (replan_period + 2 dt)``, what a vehicle can burn hovering
+  until the next plan, plus the rounding of the step;
 * ``duration`` = 600 s per run.
 
 The two modes, with the same tasks and the same failure clocks (per-vehicle generators, common random
 numbers):
 
 * ``nominal`` (thesis Fig. 4-3): the range ``r = v_max f / k_fuel`` uses the *nominal* burn rate whatever
-  the failures, so a failed vehicle keeps flying to tasks it can no longer reach and back; petals beyond
-  that range are pruned and a vehicle with nothing in range flies home (that is how a healthy vehicle
-  goes refuelling); no loiter tasks, so with no active task every airborne vehicle is called home;
+  the failures (the fuel ``f`` itself is measured), so a failed vehicle keeps flying to tasks it can no
+  longer reach and back, and turns home too late; petals beyond that range are pruned and a vehicle with
+  nothing in range flies home (that is how a healthy vehicle goes refuelling); no loiter tasks, so with
+  no active task every airborne vehicle is called home (the "needless recall" of §2.7.4);
 * ``extended`` (thesis Fig. 4-4): the range uses the *current* burn rate (a failure is seen at once), a
   vehicle for which the §2.7.5 return rule (:meth:`tasking.health.VehicleHealth.must_return`) holds is
-  sent home, and loiter tasks (:func:`loiter_tasks`: a ``loiter_grid`` × ``loiter_grid`` grid of cell
-  centres over the area, value ``loiter_value`` = 0.05, below any real task) are added whenever fewer real
-  tasks are active than vehicles can take them, so idle vehicles wait spread over the area instead of
-  being recalled.
+  sent home, and loiter tasks (:func:`loiter_tasks`: the centres of a ``loiter_grid`` × ``loiter_grid``
+  = 4 × 4 grid over the area, value ``loiter_value`` = 0.05, below any real task) are added whenever
+  fewer real tasks are active than vehicles can take them, so idle vehicles wait spread over the area
+  instead of being recalled.
 """
 
 from __future__ import annotations
@@ -47,7 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tasking.health import HealthModel, VehicleHealth
-from tasking.rhta import DEFAULT_DISCOUNT, DEFAULT_HORIZON, check_parameters, rhta
+from tasking.rhta import DEFAULT_HORIZON, check_parameters, rhta
 from tasking.tasks import Capability, Task
 
 __all__ = ["MODES", "MissionConfig", "MissionResult", "loiter_tasks", "monte_carlo", "random_arrivals",
@@ -66,16 +71,16 @@ class MissionConfig:
     """The mission's parameters (module docstring; all chosen here)."""
 
     vehicles: int = 20
-    area: float = 500.0
+    area: float = 420.0
     speed: float = 5.0
     duration: float = 600.0
     dt: float = 0.2
     arrival_rate: float = 0.2
     value_range: tuple[float, float] = (1.0, 2.0)
     horizon: int = DEFAULT_HORIZON
-    discount: float = DEFAULT_DISCOUNT
+    discount: float = 0.98
     replan_period: float = 1.0
-    loiter_grid: int = 3
+    loiter_grid: int = 4
     loiter_value: float = 0.05
     health: HealthModel = field(default_factory=HealthModel)
 

@@ -63,9 +63,9 @@ class HealthModel:
     D(t) levels of full and zero camera quality (those of :class:`perception.quality.VideoQuality`)."""
 
     capacity: float = 1.0
-    burn: float = 1.0 / 300.0  # 5 min of flight on a full tank
-    burn_failed: float = 4.0 / 300.0  # a failure quadruples the burn
-    failure_rate: float = 1.0 / 1000.0
+    burn: float = 1.0 / 600.0  # 10 min of flight on a full tank (the thesis' quad-rotors: ≈ 12 min, §5.2.4)
+    burn_failed: float = 2.0 / 600.0  # a failure doubles the burn
+    failure_rate: float = 1.0 / 500.0  # one failure per 500 s of flight on average
     refuel_time: float = 20.0
     camera_good: float = 0.03
     camera_fail: float = 0.15

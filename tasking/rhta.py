@@ -147,8 +147,8 @@ def petal_table(
     times = (first[:, :, None] + path) * (1.0 / speed)[:, None, None] + stay  # T_i
     scaled = value * np.where(camera, quality[:, None], 1.0)  # s_w, times q for camera tasks, (N_v, m)
     worth = np.pad(scaled, ((0, 0), (0, 1)))[:, padded]
-    np.power(discount, times, out=times)
-    values = discount ** elapsed[:, None] * np.einsum("vpi,vpi->vp", times, worth)  # λ^{t_v} Σ λ^{T_i} s_{w_i}
+    discounted = np.einsum("vpi,vpi->vp", discount**times, worth)  # Σ λ^{T_i} s_{w_i}
+    values = discount ** elapsed[:, None] * discounted  # λ^{t_v} Σ λ^{T_i} s_{w_i}
 
     rows = np.arange(len(petals))
     last = (petals != EMPTY).sum(axis=1) - 1

@@ -127,7 +127,7 @@ def test_camera_quality_is_the_video_quality_weight_ramp():
 
 
 def test_return_to_base_on_low_flight_time_or_failed_camera():
-    model = HealthModel(failure_rate=0.0, burn=1 / 100.0)
+    model = HealthModel(failure_rate=0.0, burn=1 / 100.0, burn_failed=2 / 100.0)
     health = VehicleHealth(model, np.random.default_rng(0), fuel=0.5)  # 50 s of flight left
     assert not health.must_return(distance_home=200.0, speed=5.0)  # 40 s home
     assert health.must_return(distance_home=200.0, speed=5.0, reserve=10.0)  # 40 s + 10 s reserve

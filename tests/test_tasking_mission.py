@@ -36,7 +36,7 @@ def test_failed_vehicle_far_out_crashes_under_nominal_and_is_recalled_under_exte
     which plans with the nominal burn, flies on and turns back only when the fuel left looks short at the
     nominal burn — too late, it runs dry before base; the extended one sees at once that the task is out
     of reach, recalls the vehicle, and it lands (grounded for the rest of the run)."""
-    model = HealthModel(failure_rate=1 / 20.0, refuel_time=1e4)
+    model = HealthModel(burn=1 / 300.0, burn_failed=4 / 300.0, failure_rate=1 / 20.0, refuel_time=1e4)
     config = replace(SMALL, vehicles=1, duration=400.0, area=700.0, health=model)
     nominal = run_mission(config, "nominal", seed=1, arrivals=_one_task(600.0))
     extended = run_mission(config, "extended", seed=1, arrivals=_one_task(600.0))
