@@ -35,6 +35,11 @@ The classic RHTA of [27] commits one task per iteration (the first task of the s
 every vehicle commits the first task of its selected petal in the same iteration (spec 000 §2.7.3 reads
 it so), which needs ``≈ #tasks / #vehicles`` iterations instead of ``#tasks``.
 
+**Loiter tasks** (§2.7.4) are valued and pruned like real tasks, with one rule added here: a loiter task
+may only end a petal. Loitering before a real task gains nothing, yet the sum (4.1) would still reward
+it — a vehicle already at a loiter point would collect its value at ``T = 0`` ahead of every real task
+and never leave.
+
 **Return to base** (§2.7.4): a vehicle with a range whose petals at the first iteration are *all* pruned
 (including the case of no active task at all) is sent home; the thesis' loiter tasks exist to keep healthy
 vehicles from this when few tasks are active.
@@ -223,6 +228,13 @@ class Plan:
     home: bool = False
 
 
+def _loiter_last(petals: np.ndarray, tasks: Sequence[Task]) -> np.ndarray:
+    """Petals in which a loiter task, if any, comes last (module docstring): ``(P,)`` bool."""
+    loiter = np.array([task.kind == "loiter" for task in tasks] + [False])  # + the padding slot
+    slots = loiter[np.where(petals == EMPTY, len(tasks), petals)]
+    return ~np.any(slots[:, :-1] & (petals[:, 1:] != EMPTY), axis=1)
+
+
 def _by_key(keys) -> list:
     """Keys in sorted order (by ``repr`` when the keys do not compare)."""
     try:
@@ -260,10 +272,12 @@ def rhta(
     # One table over all tasks; a committed task closes its petals, a moved vehicle gets its row again.
     table = petal_table(state, tasks, horizon, discount)
     home = [vehicle.reach is not None and not table.feasible[v].any() for v, vehicle in enumerate(state)]
+    allowed = _loiter_last(table.petals, tasks)  # petals still open: loiter only at the end, no task assigned
     assigned = np.zeros(len(tasks), dtype=bool)
     while not assigned.all():
-        table = replace(table, feasible=table.feasible & ~table.visits[:, assigned].any(axis=1))
-        choice = select(table)
+        allowed &= ~table.visits[:, assigned].any(axis=1)
+        current = replace(table, feasible=table.feasible & allowed)
+        choice = select(current)
         moved = np.flatnonzero(choice != EMPTY)
         if moved.size == 0:
             break
@@ -276,7 +290,7 @@ def rhta(
             state[v] = replace(vehicle, position=task.position, reach=reach)
             plans[v].append(task.key)
             assigned[first] = True
-        if first_only and all(plans[v] or not table.feasible[v].any() for v in range(len(names))):
+        if first_only and all(plans[v] or not current.feasible[v].any() for v in range(len(names))):
             break
         rows = petal_table([state[v] for v in moved], tasks, horizon, discount, elapsed[moved])
         values, feasible = table.values.copy(), table.feasible.copy()

@@ -205,6 +205,14 @@ def test_loiter_tasks_keep_healthy_vehicles_out():
     assert not any(plan.home for plan in rhta({"x": _vehicle(reach=None)}, []).values())  # no range model
 
 
+def test_a_loiter_task_only_ends_a_petal():
+    """At its loiter point, a vehicle's petal (loiter, task) would be worth the task's value plus the
+    loiter's at T = 0 and keep it there; the loiter task may only come last, so it serves the task."""
+    here = Task(("loiter", 0), [0.0, 0.0], 0.1, kind="loiter")
+    task = Task("t", [30.0, 0.0], 1.0)
+    assert rhta({"v": _vehicle()}, [here, task], horizon=2, discount=0.95)["v"].tasks == ("t", ("loiter", 0))
+
+
 @pytest.mark.parametrize("bad, match", [
     (lambda: rhta({"v": _vehicle()}, [], horizon=0), "n_c"),         # n_c < 1
     (lambda: rhta({"v": _vehicle()}, [], horizon=1.5), "n_c"),       # n_c not an integer
