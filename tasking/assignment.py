@@ -14,6 +14,11 @@ task, a peer closer than the separation layer's reach turns the goal into a poin
 velocity (:class:`tasking.separation.SeparationLayer`, thesis 000 §2.9), so that no two vehicles come
 closer than ``min_separation``.
 
+**Health** (``flight_time`` > 0; thesis 000 §2.7.4-2.7.5, :mod:`tasking.sortie`): fuel burns while flying,
+failures arrive as a Poisson process (``failure_rate``) and multiply the burn (``failure_burn``); a
+vehicle bids only for petals it can fly and still come home from, goes home when its fuel (at the current
+burn) or its camera say so, refuels there and comes back; its camera quality scales its bids.
+
 Parameters chosen here (the thesis gives none for the fleet): values 10 (track) and 1 (search), time
 discount λ = 0.95 per second (a target 100 m away at 10 m/s is worth 0.6 of one at hand), one task per
 vehicle (``capacity`` = L_t = 1: tasks are served continuously, not visited), ``stickiness`` 1.2.
@@ -28,12 +33,14 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from tasking.base import AssignmentView, VehicleStateLike
+from tasking.health import HealthModel
 from tasking.orbit import Goal, goto_goal, orbit_setpoint
 from tasking.search import Area, WaypointFollower, check_area, lawnmower_waypoints
 from tasking.separation import SeparationLayer
 from tasking.tasks import Task
 
 SEPARATION_LOOKAHEAD = 1.0  # s: a separated velocity becomes a goal this far ahead
+OPTIONAL = frozenset({"min_separation", "flight_time", "failure_rate", "refuel_time", "reserve"})  # 0: off / none
 
 @dataclass(frozen=True)
 class AssignmentConfig:
@@ -50,13 +57,19 @@ class AssignmentConfig:
     cruise_speed: float = 10.0  # m/s, the travel-time estimate of the scores
     match_radius: float = 25.0  # m: a peer's track task within this of ours is the same task
     min_separation: float = 10.0  # m: no two vehicles closer (tasking.separation), 0 switches the layer off
+    flight_time: float = 0.0  # s on a full tank (tasking.sortie; 0: no health model)
+    failure_rate: float = 0.0  # p_f, failures per second of flight (Poisson)
+    failure_burn: float = 2.0  # k_fuel,failure / k_fuel: a failure multiplies the burn rate
+    refuel_time: float = 20.0  # s on the ground at the base to refuel and repair
+    reserve: float = 10.0  # s of flight kept in hand on the way home
+    landing_radius: float = 5.0  # m from the base at which a returning vehicle lands
     period: float = 1.0  # s between bid broadcasts when nothing changed
 
     def __post_init__(self):
         for f in fields(self):
             value = getattr(self, f.name)
             bad = isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value)
-            if bad or value < 0 or (value == 0 and f.name != "min_separation"):
+            if bad or value < 0 or (value == 0 and f.name not in OPTIONAL):
                 raise ValueError(f"tasking.{f.name} must be a positive number, got {value!r}")
         if not 0 < self.discount <= 1:
             raise ValueError(f"tasking.discount (λ) must be in (0, 1], got {self.discount}")
@@ -64,6 +77,8 @@ class AssignmentConfig:
             raise ValueError(f"tasking.capacity must be an integer, got {self.capacity}")
         if self.stickiness < 1:
             raise ValueError(f"tasking.stickiness must be ≥ 1, got {self.stickiness}")
+        if self.failure_burn < 1:
+            raise ValueError(f"tasking.failure_burn must be ≥ 1 (a failure burns faster), got {self.failure_burn}")
         if self.search_value >= self.track_value:
             raise ValueError(f"tasking.search_value ({self.search_value}) must be below track_value "
                              f"({self.track_value}): a target in view comes before an area to search")
@@ -71,6 +86,14 @@ class AssignmentConfig:
     @classmethod
     def from_options(cls, options: Mapping[str, object]) -> AssignmentConfig:
         return cls(**{k: v for k, v in options.items() if k in {f.name for f in fields(cls)}})
+
+    def health_model(self) -> HealthModel | None:
+        """The fleet's :class:`tasking.health.HealthModel` (``None`` without ``flight_time``)."""
+        if self.flight_time <= 0:
+            return None
+        burn = 1.0 / self.flight_time  # k_fuel on a tank of capacity 1
+        return HealthModel(capacity=1.0, burn=burn, burn_failed=burn * max(self.failure_burn, 1.0 + 1e-9),
+                           failure_rate=self.failure_rate, refuel_time=self.refuel_time)
 
 
 def search_cells(area: Area, cell: float) -> dict[str, np.ndarray]:

@@ -64,7 +64,7 @@ def _tasks(ctx: ExchangeContext) -> BeliefExchange | None:
     from agent.beliefs.assignment import AssignmentExchange
 
     return AssignmentExchange(ctx.me, AssignmentConfig.from_options(options), sc.area.as_tuple(),
-                              ctx.vehicle.state().position, ctx.views, ctx.vehicle)
+                              ctx.vehicle.state().position, ctx.views, ctx.vehicle, ctx.seed)
 
 
 EXCHANGES: dict[str, Callable[[ExchangeContext], BeliefExchange | None]] = {

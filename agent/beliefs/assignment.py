@@ -37,6 +37,8 @@ from fusion.resync import Edge
 from tasking.assignment import AssignmentConfig, fleet_tasks, search_cells
 from tasking.base import AssignmentView
 from tasking.cbba import CBBA, Bids, path_score
+from tasking.health import VehicleHealth
+from tasking.sortie import Sortie
 from tasking.tasks import Capability, Task
 
 TRACK = "track"
@@ -46,8 +48,14 @@ CROWD = 4.0  # peers closer than this many minimum separations get the position 
 class AssignmentExchange:
     kind = "tasks"
 
-    def __init__(self, me: str, config: AssignmentConfig, area, base: np.ndarray, views: Views, vehicle):
+    def __init__(self, me: str, config: AssignmentConfig, area, base: np.ndarray, views: Views, vehicle,
+                 seed: int = 0):
         self.me, self.config, self.views, self.vehicle = me, config, views, vehicle
+        model = config.health_model()
+        self.sortie = None if model is None else Sortie(
+            VehicleHealth(model, np.random.default_rng([seed, 7])), config.cruise_speed, config.reserve,
+            config.landing_radius)
+        self._video: float | None = None
         self.base = np.asarray(base, float)[:2]
         self.cells = search_cells(area, config.search_cell)
         self.cbba = CBBA(me, config.capacity, config.stickiness)
@@ -69,16 +77,22 @@ class AssignmentExchange:
         return {}
 
     def absorb(self, t: float, observations) -> None:
-        return None
+        """The camera's video quality D(t), for the health model's camera state."""
+        self._video = observations.get("video_quality")
 
     def settle(self, t: float) -> None:
-        """Rebuild the task set from the fused picture and re-bid the bundle from where the vehicle is."""
+        """Rebuild the task set from the fused picture, update the sortie, and re-bid the bundle from where the
+        vehicle is (a vehicle that is not flying its sortie bids for nothing: its tasks go to others)."""
         self.tasks = fleet_tasks(self.views["track"].positions, self.cells, self.config)
         position = self.vehicle.state().position[:2]
-        me = Capability(position, self.config.cruise_speed, self.base)
         serving = self.cbba.path[0] if self.cbba.path else None
-        self.cbba.rebuild(self.tasks, path_score(me, self.config.discount))
-        self.home = False
+        if self.sortie is None:
+            me, bidding = Capability(position, self.config.cruise_speed, self.base), True
+        else:
+            state = self.sortie.update(t, position, self.base, self._video)
+            me, bidding = self.sortie.capability(position, self.base), state == "flying"
+            self.home = state in ("home", "refuelling")
+        self.cbba.rebuild(self.tasks if bidding else {}, path_score(me, self.config.discount))
         if (self.cbba.path[0] if self.cbba.path else None) != serving:
             self.changes += 1
 
@@ -168,7 +182,9 @@ class AssignmentExchange:
 
     def metrics(self) -> dict:
         kinds = Counter(self.tasks[key].kind for key in self.cbba.path if key in self.tasks)
-        return {"assignment": {"task_changes": self.changes, "conflicts_resolved": self.cbba.conflicts_resolved,
+        health = {} if self.sortie is None else {"health": self.sortie.metrics()}
+        return {"assignment": {**health, "task_changes": self.changes,
+                               "conflicts_resolved": self.cbba.conflicts_resolved,
                                "merges": self.merges,
                                "serving": dict(kinds),
                                "timeline": [[t, served] for t, served in self.timeline],

@@ -79,7 +79,9 @@ class BearingSource:
         self._targets = truth.targets or []
 
     def measure(self, t: float, state) -> dict:
-        return {"bearings": self.detect(t, state, self._targets)}
+        bearings = self.detect(t, state, self._targets)
+        return {"bearings": bearings} if self.video_quality is None else {"bearings": bearings,
+                                                                          "video_quality": self.video_quality}
 
     def telemetry(self) -> dict:
         return {"video_quality": self.video_quality}

@@ -161,3 +161,23 @@ def test_agreement_weighs_time_and_times_how_fast_changes_settle():
 def test_bad_tasking_sections_are_refused_when_the_scenario_is_read(section, match):
     with pytest.raises(ValueError, match=match):
         check_tasking(section, frozenset({"track", "tasks"}))
+
+
+def test_a_vehicle_sent_home_hands_its_target_to_its_peer():
+    tracks = [(0, np.array([60.0, 0.0]))]
+    # a starts next to the target with 12 s of fuel and its base 120 m away: it must go home at once
+    a = _exchange("a", (55.0, 0.0), tracks, flight_time=12.0, reserve=2.0)
+    b = _exchange("b", (-60.0, 0.0), tracks)
+    a.base = np.array([-65.0, 0.0])
+    for step in range(8):
+        _talk(a, b, 0.2 * step)
+    assert a.view().home and a.view().task is None and a.cbba.bundle == []
+    assert b.view().task.kind == "track" and b.cbba.winners["track:0"] == "b"
+    assert a.metrics()["assignment"]["health"]["state"] == "home"
+
+
+def test_health_settings_are_checked():
+    with pytest.raises(ValueError, match="failure_burn"):
+        AssignmentConfig(flight_time=60.0, failure_burn=0.5)  # a failure that makes the engine thriftier
+    assert AssignmentConfig().health_model() is None
+    assert AssignmentConfig(flight_time=60.0).health_model().burn == pytest.approx(1 / 60)
