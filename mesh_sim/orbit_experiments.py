@@ -16,15 +16,27 @@ Communication is the disk graph ``‖ξ_i - ξ_j‖ < C_r`` in synchronous round
 1. every UAV that sees the target forms ``m_i`` (004 Eq. (2)) with ``r`` the GPS distance to its centre;
 2. rounds 1..f of the consensus WLS with Metropolis weights on ``(P, q) = (I, m_i)`` (equal weights: the
    paper's centroid), every UAV taking part (the ones without a measurement relay zero information);
-3. the KCF (round 2) at every orbiting UAV with ``z_i`` = its round-1 WLS estimate;
+3. the KCF (round 2) at every tracking UAV with ``z_i`` = its round-1 WLS estimate of the *reflected* measures
+   (:func:`tasking.centre_measure.reflected_measures`, sent with ``m_i`` in round 1; chosen here: the centroid
+   of Eq. (2) is biased towards the current centre by ``(1 - β/2) e``, which a filter with ``H = [I 0]`` reads as
+   the target, settles on a wrong velocity and drifts); on entering the stage the filter starts at
+   ``[p̂_i, v̂_i]`` with ``v̂_i`` the least-squares slope of the centre over the last ``approach_readings`` steps
+   (the approaching stage's centre moves with the target once it has converged; chosen here);
 4. one WLS round (round 3) on the KCF posteriors, information-weighted (``M_i⁻¹``);
-5. centres (004 Eq. (4)): a UAV in the approaching stage takes the round-``f`` WLS estimate, one in the
-   tracking stage the round-3 estimate predicted to the next step (``A x̂_{i,ML}``, so the centre moves with
-   the target; chosen here); a UAV told a circle (:mod:`tasking.rendezvous` case 1) takes the mean centre of
-   the orbiting UAVs it hears that have target information this step (a blind circle recruits nobody); a UAV
-   with no information keeps its centre (and keeps rotating);
-6. set-points: rotation with equal spacing on the circle plus translation with the centre (§2.8), or the
-   next random patrol point for a searching UAV (§2.9, 200 x 200 m).
+5. centres (004 Eq. (4)): a UAV in the approaching stage takes the round-``f`` WLS estimate, one in the tracking stage
+   the round-3 estimate, ``[p̂_i(t+1); ṗ̂_i(t+1)] = x̂_{i,ML}(t)`` (004 §2.7 step 5 as written: the centre is the
+   estimate of ``p(t)``, a one-step lag ``|v| Δt`` at the next sampling instant — which with the paper's noise floor
+   gives its dynamic E2 figures, sqrt(0.25² + (8√2 · 0.05)²) = 0.62 m at v = 8; the velocity is the translation's
+   feed-forward, §2.8); a UAV told a circle (:mod:`tasking.rendezvous` case 1) takes the mean centre of the
+   orbiting UAVs it hears that have target information this step (a blind circle recruits nobody); a UAV with no
+   information keeps its centre (and keeps rotating);
+6. set-points: rotation with equal spacing on the circle plus translation with the centre (§2.8): each UAV
+   keeps its phase on the circle it was orbiting and that circle moves to the new centre
+   (:func:`tasking.circle_spacing.spacing_setpoint`), or the next random patrol point for a searching UAV
+   (§2.9, 200 x 200 m).
+
+The error of Eq. (1) is taken at the sampling instants, ``e_p(t) = p̂(t) - p(t)`` with ``p̂(t)`` the centre the
+UAVs orbit while measuring at ``t``.
 
 ``f = 3`` by default, so the static algorithm also sends 3 messages per step (the paper: "after five
 iterations the difference ... is negligible"; 3 is its message budget in Sec. 6).
@@ -35,8 +47,9 @@ equally spaced UAVs and exact consensus the static error obeys ``e ← (1 - Λ/2
 RMSE is ``r σ_η sqrt(Λ / (n (1 - Λ/4)))`` = 0.27 m at n = 5 — the paper's own static figure at v = 0, so
 ``r`` is calibrated on that one number and every other figure is a prediction; ``R_max = ∞`` in 6.1 (not
 given; with the 30° FOV the 18 m initial offset is then visible from the far side of the circle). KCF:
-``R = (0.4 m)² I`` (a measure's noise ``Λ r σ_η`` along one axis, halved in variance over two axes; the
-one-step WLS averages ~n measures and ``S_i`` adds ~n such averages back, which cancel), ``P0 = diag(5 m, 5 m,
+``R = (sqrt(2) r σ)² I`` with ``σ² = σ_η² + σ_ψ²`` (0.74 m at r = 30 m: a reflected measure's noise ``2 r σ`` along
+``l_⊥``, halved in variance over two axes; the one-step WLS averages ~n measures and ``S_i`` adds ~n such
+averages back, which cancel), ``P0 = diag(5 m, 5 m,
 8 m/s, 8 m/s)²``, ``ε = 0.5``, σ_a = 0.01 m/s² (the paper; E1 passes its own value, see
 :mod:`mesh_sim.bench.tasking_orbit`); approaching stage of 20 readings; ω_0 = 0.2 rad/s, k_θ = 0.5 1/s.
 
@@ -58,7 +71,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mesh_sim.targets import ConstantVelocityTarget, Figure8Target, SingerTarget, StaticTarget
-from tasking.centre_measure import ETA_MAX, bearing, centre_measures, heading, visible
+from tasking.centre_measure import (
+    ETA_MAX,
+    bearing,
+    centre_measures,
+    heading,
+    reflected_measures,
+    reflected_noise_std,
+    visible,
+)
 from tasking.circle_spacing import K_THETA, MAX_SPEED, OMEGA_0, cap_speed, circle_gaps, spacing_rate, spacing_setpoint
 from tasking.consensus import (
     DoubleIntegrator,
@@ -96,7 +117,7 @@ class OrbitConfig:
     sigma_yaw: float = 0.0
     sigma_gps: float = 0.02
     sigma_a: float = 0.01
-    kcf_R_std: float = 0.4
+    kcf_R_std: float | None = None  # None: the reflected measure's own noise (module docstring)
     kcf_P0_std: tuple[float, float] = (5.0, 8.0)
     epsilon: float = 0.5
     omega_0: float = OMEGA_0
@@ -115,6 +136,14 @@ class OrbitConfig:
     @property
     def steps(self) -> int:
         return int(round(self.duration / self.dt))
+
+    @property
+    def kcf_R(self) -> float:
+        """The KCF's per-axis measurement std [m]: ``kcf_R_std``, or the reflected measure's
+        ``sqrt(2) r sqrt(σ_η² + σ_ψ²)`` (:func:`tasking.centre_measure.reflected_noise_std`)."""
+        if self.kcf_R_std is not None:
+            return self.kcf_R_std
+        return reflected_noise_std(self.radius, math.hypot(self.sigma_bearing, self.sigma_yaw))
 
     @property
     def rules(self) -> StageRules:
@@ -183,18 +212,21 @@ def simulate(
     steps = paths.shape[1]
     eye = np.eye(n, dtype=bool)
     model = DoubleIntegrator(c.dt, c.sigma_a)
-    R_kcf = c.kcf_R_std**2 * np.eye(2)
+    R_kcf = c.kcf_R**2 * np.eye(2)
     P0 = np.diag(np.repeat(np.square(c.kcf_P0_std), 2))
     xi, centre = positions.astype(float).copy(), centres.astype(float).copy()
     state = StageState.start((runs, n), stage)
     kcf_mean, kcf_cov = np.zeros((runs, n, 4)), np.broadcast_to(P0, (runs, n, 4, 4)).copy()
     waypoint = _patrol_points(rng, (runs, n))
+    window = max(2, c.approach_readings)  # the centre history the KCF's velocity starts from
+    history = np.broadcast_to(centre[:, None], (runs, window, n, 2)).copy()
     errors = np.empty((runs, steps, n, 2))
     circle = np.empty((runs, steps, n))
     stages = np.empty((runs, steps, n), dtype=np.int8)
     for k in range(steps):
         p = paths[:, k, None, :]  # (R, 1, 2)
         orbiting, stage_before = state.orbiting, state.stage
+        errors[:, k] = centre - p  # 004 Eq. (1): e_p(t) = p̂(t) - p(t), the centres the UAVs orbit during step t
         # --- communication graph and camera
         adjacency = (np.linalg.norm(xi[:, :, None] - xi[:, None, :], axis=-1) < c.comm_range) & ~eye
         W = metropolis_weights(adjacency)
@@ -210,13 +242,15 @@ def simulate(
         m = centre_measures(
             look_at, axis_measured, eta_measured, np.linalg.norm(look_at - gps, axis=-1), c.kappa, c.Lambda
         )
+        reflected = reflected_measures(look_at, m, c.kappa, c.Lambda)
         # --- 2. consensus WLS rounds
         P, q = wls_information(m, np.eye(2), sees)
-        P, q = consensus_round(W, P, q)
-        one_step, informed_one = wls_estimate(P, q, look_at)
-        for _ in range(c.wls_iterations - 1):
+        for _ in range(c.wls_iterations):
             P, q = consensus_round(W, P, q)
         static_estimate, informed = wls_estimate(P, q, look_at)
+        if c.dynamic:  # the KCF's measure: one round on the reflected measures, sent with m_i in round 1
+            P1, q1 = consensus_round(W, *wls_information(reflected, np.eye(2), sees))
+            one_step, informed_one = wls_estimate(P1, q1, look_at)
         # --- rendezvous: who hears an orbiting UAV that has target information, and the circle it is told
         orbit_links = adjacency & (orbiting & informed)[:, None, :]
         hears_orbit = orbit_links.any(axis=-1)
@@ -231,7 +265,8 @@ def simulate(
         tracking = state.stage == Stage.TRACK
         if c.dynamic and tracking.any():
             entering = (tracking & ~(stage_before == Stage.TRACK))[..., None]
-            kcf_mean = np.where(entering, np.concatenate([centre, np.zeros_like(centre)], -1), kcf_mean)
+            warm = np.concatenate([centre, _slope(history, c.dt)], -1)  # [p̂_i, LS velocity of the approach]
+            kcf_mean = np.where(entering, warm, kcf_mean)
             kcf_cov = np.where(entering[..., None], P0, kcf_cov)
             kcf = kcf_step(
                 model,
@@ -246,16 +281,16 @@ def simulate(
             info = np.where(tracking[..., None, None], np.linalg.inv(kcf.cov), 0.0)
             P4, q4 = consensus_round(W, info, (info @ kcf.mean[..., None])[..., 0])
             x_ml, _ = wls_estimate(P4, q4, kcf.mean)
-            predicted = x_ml @ model.A.T  # A x̂_{i,ML}: the centre for the next step
-            new_centre = np.where(tracking[..., None], predicted[..., :2], new_centre)
-            velocity = np.where(tracking[..., None], predicted[..., 2:], velocity)
+            new_centre = np.where(tracking[..., None], x_ml[..., :2], new_centre)  # [p̂_i(t+1); ṗ̂_i(t+1)] = x̂_{i,ML}(t)
+            velocity = np.where(tracking[..., None], x_ml[..., 2:], velocity)
             kcf_mean, kcf_cov = kcf.next_mean, kcf.next_cov
+        phase_centre = np.where(orbiting[..., None], centre, new_centre)  # the circle each UAV was on (§2.8)
         centre = np.where(active[..., None], new_centre, centre)
-        errors[:, k] = centre - p
+        history = np.concatenate([history[:, 1:], centre[:, None]], axis=1)
         circle[:, k] = np.abs(np.linalg.norm(xi - p, axis=-1) - c.radius)
         stages[:, k] = state.stage
         # --- set-points and motion
-        theta, ahead, behind = circle_gaps(centre, xi, adjacency & active[:, :, None] & active[:, None, :])
+        theta, ahead, behind = circle_gaps(phase_centre, xi, adjacency & active[:, :, None] & active[:, None, :])
         rate = spacing_rate(
             ahead, behind, c.radius, c.dt, np.linalg.norm(velocity, axis=-1), c.omega_0, c.k_theta, c.max_speed
         )
@@ -265,6 +300,13 @@ def simulate(
         goal = np.where(active[..., None], orbit.position, waypoint)  # where to be at t + Δt
         xi = xi + c.dt * cap_speed((goal - xi) / c.dt, c.max_speed)
     return SimResult(np.arange(steps) * c.dt, errors, circle, stages)
+
+
+def _slope(history: np.ndarray, dt: float) -> np.ndarray:
+    """Least-squares velocity ``(R, n, 2)`` of the centre history ``(R, W, n, 2)`` (oldest first) sampled every
+    ``dt``: ``Σ_j (t_j - t̄) p̂(t_j) / Σ_j (t_j - t̄)²``."""
+    offsets = (np.arange(history.shape[1]) - (history.shape[1] - 1) / 2.0) * dt  # t_j - t̄
+    return np.tensordot(offsets / np.sum(offsets**2), history, axes=(0, 1))
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:

@@ -104,6 +104,39 @@ def centre_measures(centre, axis_heading, eta, radius, kappa: float, Lambda: flo
     return centre + l_perp * step[..., None]  # m_i = p̂_i + l_⊥ sat(...), Eq. (2)
 
 
+def reflected_measures(centre, measures, kappa: float, Lambda: float) -> np.ndarray:
+    """The centre measures of Eq. (2) taken to the full step ``2 r sin η_i``: ``p̂_i`` reflected across the LOS,
+
+        ``m̃_i = p̂_i + (2 / β) (m_i - p̂_i) = p̂_i + 2 r sin η_i l_⊥``,  ``β = min(κ, Λ)``.
+
+    Unbiased measure of the target for the Kalman filter (chosen here; the paper feeds the KCF ``m_{i,ML}``,
+    spec 004 §2.6). With the target on the LOS and ``e = p̂_i - p``, Eq. (2) gives
+    ``m_i - p = (I - β (I - ℓℓᵀ)) e``, and for ``n >= 3`` equally spaced UAVs ``(1/n) Σ ℓ_i ℓ_iᵀ = I/2``, so the
+    centroid is ``m_ML - p = (1 - β/2) e``. That bias towards the current centre is what makes the static
+    algorithm a contraction (Theorem 1), but a KCF with ``H = [I 0]`` reads it as the target: its innovations are
+    ``β/2`` of the true error, so its velocity converges ``β/2`` as fast as its covariance claims, and a filter
+    that enters the tracking stage with a large error settles on a wrong velocity and drifts away. The
+    reflection gives ``m̃_i - p = (2ℓℓᵀ - I) e``, whose centroid is 0 for equal spacing (and never larger than
+    ``|e|`` otherwise). Its noise is twice that of the LOS point: see :func:`reflected_noise_std`.
+
+    ``centre (..., 2)`` are the ``p̂_i`` the measures ``(..., 2)`` were formed about."""
+    _check_gains(kappa, Lambda)
+    centre = np.asarray(centre, dtype=float)
+    return centre + (2.0 / min(kappa, Lambda)) * (np.asarray(measures, dtype=float) - centre)  # p̂ + (2/β)(m - p̂)
+
+
+def reflected_noise_std(radius: float, sigma_angle: float) -> float:
+    """Per-axis standard deviation of :func:`reflected_measures` for LOS-direction noise ``sigma_angle`` [rad]
+    (bearing and axis heading combined, ``sqrt(σ_η² + σ_ψ²)``): the reflection of ``p̂_i`` across a line through
+    the UAV, ``r`` away, moves ``2 r δ`` along ``l_⊥`` for a small rotation ``δ`` of that line, and a random
+    ``l_⊥`` direction splits that variance evenly over the two axes: ``sqrt((2 r σ)² / 2) = sqrt(2) r σ``."""
+    if not (math.isfinite(radius) and radius >= 0):
+        raise ValueError(f"radius must be a finite non-negative distance, got {radius}")
+    if not (math.isfinite(sigma_angle) and sigma_angle >= 0):
+        raise ValueError(f"sigma_angle must be a finite non-negative angle, got {sigma_angle}")
+    return math.sqrt(2.0) * radius * sigma_angle  # sqrt((2 r σ)² / 2)
+
+
 def centre_measure(
     centre,
     axis_heading: float,

@@ -11,7 +11,11 @@ spaced (Zhao et al.). The law below is the minimal implementation of spec 004 §
   ``g⁺ = (θ_{i⁺} - θ_i) mod 2π`` and ``g⁻ = (θ_i - θ_{i⁻}) mod 2π`` in (0, 2π] (both 2π when it hears nobody);
 * ``θ̇_i = ω_0 + k_θ (g⁺ - g⁻) / 2`` (spec 004 §2.8), clipped to ``[0, θ̇_max]`` with
   ``θ̇_max = min(2π / (3 Δt), (v_max - |ṗ̂_i|) / r)``: at least 3 measurements per revolution (Corollary 1)
-  and the tangential speed within what the 13 m/s cap leaves after the centre's own motion;
+  and the tangential speed within what the 13 m/s cap leaves after the centre's own motion. When
+  ``ω_0 > θ̇_max / 2`` the nominal rate is lowered to ``θ̇_max / 2``: otherwise every UAV sits at the cap, the
+  spacing term has no effect, and the UAVs stay bunched (at 11 m/s on a 30 m circle, ``θ̇_max`` = 0.06 rad/s);
+  bunched UAVs see the target along nearly parallel lines of sight, which leaves the estimate unobservable
+  along them;
 * set-point ``ξ_i^d = p̂_i + r [cos θ_i, sin θ_i]`` (the radial projection of the UAV on its circle: a UAV far
   from it flies point-to-point to it) with the feed-forward velocity ``ξ̇_i^d = ṗ̂_i + r θ̇_i [-sin θ_i, cos θ_i]``
   (translation with the centre plus rotation), scaled to at most ``v_max``.
@@ -87,24 +91,31 @@ def spacing_rate(
         raise ValueError(f"k_theta must be a non-negative gain, got {k_theta}")
     if not (math.isfinite(max_speed) and max_speed > 0):
         raise ValueError(f"max_speed must be a positive speed, got {max_speed}")
-    rate = omega_0 + k_theta * (np.asarray(gap_ahead) - np.asarray(gap_behind)) / 2.0  # θ̇ = ω_0 + k_θ (g⁺ - g⁻)/2
     tangential_room = np.maximum(max_speed - np.asarray(centre_speed, dtype=float), 0.0) / radius
     rate_max = np.minimum(2.0 * np.pi / (3.0 * dt), tangential_room)  # ≥ 3 measures per turn; speed cap
+    nominal = np.minimum(omega_0, rate_max / 2.0)  # ω_0, leaving the spacing term room both ways
+    rate = nominal + k_theta * (np.asarray(gap_ahead) - np.asarray(gap_behind)) / 2.0  # θ̇ = ω_0 + k_θ (g⁺ - g⁻)/2
     return np.clip(rate, 0.0, rate_max)
 
 
 def spacing_setpoint(
     centre, centre_velocity, theta, rate, radius: float, max_speed: float = MAX_SPEED, lead: float = 0.0
 ) -> SetPoint:
-    """The set-point on the circle of ``radius`` about ``centre`` at the UAV's phase ``θ_i``, with the
-    feed-forward velocity ``ṗ̂_i + r θ̇_i t̂`` (capped at ``max_speed``). With ``lead > 0`` it is the set-point
-    ``lead`` seconds ahead along that motion (centre ``p̂_i + ṗ̂_i lead``, phase ``θ_i + θ̇_i lead``): what a
-    point-mass follower stepping by ``lead`` aims at, so it stays on the circle instead of on its tangent."""
+    """The set-point on the circle of ``radius`` about ``centre`` at the phase ``θ_i + θ̇_i lead``, with the
+    feed-forward velocity ``ṗ̂_i + r θ̇_i t̂`` (capped at ``max_speed``).
+
+    ``centre`` is the centre at the set-point's time: the translation is already in it (``p̂_i(t+1)`` of
+    Eq. (4) or of the tracking stage), so a point-mass follower stepping by ``lead`` towards the set-point stays
+    on the circle instead of on its tangent. ``θ_i`` is the UAV's phase on the circle it was orbiting (about
+    ``p̂_i(t)``): the circle translates and the UAV keeps its place on it (the "translation towards the estimated
+    centre" superimposed on the rotation, 004 §2.8). Taking the phase about the new centre instead projects the
+    UAV radially onto the translated circle, and a moving centre then slips every UAV towards the trailing side
+    of its circle by ``|ṗ̂| / r`` rad/s, which bunches them up (at 11 m/s on a 30 m circle, faster than ``ω_0``)."""
     _check_radius(radius)
     if not (math.isfinite(lead) and lead >= 0):
         raise ValueError(f"lead must be a non-negative time, got {lead}")
     rate = np.asarray(rate, dtype=float)
-    centre = np.asarray(centre, dtype=float) + lead * np.asarray(centre_velocity, dtype=float)
+    centre = np.asarray(centre, dtype=float)
     phase = np.asarray(theta, dtype=float) + rate * lead
     radial = np.stack([np.cos(phase), np.sin(phase)], axis=-1)
     tangent = np.stack([-np.sin(phase), np.cos(phase)], axis=-1)

@@ -9,14 +9,13 @@ spec 004 §5) reproduced with :mod:`mesh_sim.orbit_experiments`, side by side wi
 * **E3** (004 §5.3, Fig. 5): rendezvous on a static target after a random search; every UAV's final distance
   to the target circle (paper: all converge; no number given).
 
-Choices (the paper does not give them; see :mod:`mesh_sim.orbit_experiments` for the rest): κ = 6, Λ = 1,
-r = 30 m and R_max = ∞ in 6.1 (r calibrated on E2's static v = 0 figure through the closed form, so that goal
-is a consistency check, not a prediction), KCF R = (0.4 m)² I, P0 = diag(5, 5 m, 8, 8 m/s)², ε = 0.5. In E1 the
-dynamic algorithm uses σ_a = 2 m/s² (Bar-Shalom's rule of thumb, 0.5-1 times the 8's peak acceleration of
-2.56 m/s²): with the paper's σ_a = 0.01 m/s² a constant-velocity filter cannot follow the figure-8, which one
-extra row shows; E2 (a truly constant velocity) keeps the paper's 0.01 m/s². "≈" in the goals means within
-±30 % (chosen here). Quick mode: 2 runs, n ∈ {3, 12}, v ∈ {0, 8}, shorter E2/E3 runs; full: 50 runs per
-configuration.
+Choices (the paper does not give them; see :mod:`mesh_sim.orbit_experiments` for the rest): κ = 6, Λ = 1, r = 30 m and
+R_max = ∞ in 6.1 (r calibrated on E2's static v = 0 figure through the closed form, so that goal is a consistency check,
+not a prediction), KCF R = (√2 r σ_η)² I (the reflected measure's noise), P0 = diag(5, 5 m, 8, 8 m/s)², ε = 0.5. In E1
+the dynamic algorithm uses σ_a = 2 m/s² (Bar-Shalom's rule of thumb, 0.5-1 times the 8's peak acceleration of 2.56
+m/s²): with the paper's σ_a = 0.01 m/s² a constant-velocity filter cannot follow the figure-8, which one extra row
+shows; E2 (a truly constant velocity) keeps the paper's 0.01 m/s². "≈" in the goals means within ±30 % (chosen here).
+Quick mode: 2 runs, n ∈ {3, 12}, v ∈ {0, 8}, shorter E2/E3 runs; full: 50 runs per configuration.
 """
 
 from __future__ import annotations
@@ -156,7 +155,7 @@ def _parameters() -> dict:
         "R_max_6.2_m": rendezvous.range_max,
         "wls_iterations": tracking.wls_iterations,
         "epsilon": tracking.epsilon,
-        "kcf_R_std_m": tracking.kcf_R_std,
+        "kcf_R_std_m": tracking.kcf_R,
         "kcf_P0_std": list(tracking.kcf_P0_std),
         "sigma_a_E2": tracking.sigma_a,
         "sigma_a_E1": E1_SIGMA_A,

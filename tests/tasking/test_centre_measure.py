@@ -14,6 +14,8 @@ from tasking.centre_measure import (
     centre_measure,
     centre_measures,
     heading,
+    reflected_measures,
+    reflected_noise_std,
     rotate,
     saturation_binds,
     visible,
@@ -121,3 +123,26 @@ def test_bad_inputs_raise_naming_the_value(kwargs, named):
 def test_batched_nan_bearing_raises():
     with pytest.raises(ValueError, match="eta"):
         centre_measures(np.zeros((2, 2)), [0.0, 0.0], [0.1, np.nan], [15.0, 15.0], 6.0, 1.0)
+
+
+def test_reflected_measures_are_unbiased_for_equal_spacing_and_have_the_stated_noise():
+    """The centroid of Eq. (2) is biased by (1 - β/2) e towards the centre; the reflected measures' centroid is the
+    target for n = 5 equally spaced UAVs (oracle: the target), and their per-axis noise is sqrt(2) r σ (Monte Carlo)."""
+    radius, kappa, Lambda, n = 30.0, 6.0, 1.0, 5
+    target, centre = np.array([0.0, 0.0]), np.array([1.2, -0.7])
+    phases = 2 * np.pi * np.arange(n) / n + 0.3
+    uavs = centre + radius * np.stack([np.cos(phases), np.sin(phases)], -1)
+    axis = np.arctan2(*(centre - uavs).T[::-1])
+    eta = bearing(uavs, axis, target)
+    m = centre_measures(centre, axis, eta, np.linalg.norm(centre - uavs, axis=-1), kappa, Lambda)
+    np.testing.assert_allclose(m.mean(axis=0), target + (1 - Lambda / 2) * (centre - target), atol=2e-2)
+    reflected = reflected_measures(centre, m, kappa, Lambda)
+    np.testing.assert_allclose(reflected.mean(axis=0), target, atol=2e-2)
+    sigma = math.radians(1.0)
+    rng = np.random.default_rng(0)
+    noisy_eta = eta + sigma * rng.standard_normal((20000, n))
+    noisy = reflected_measures(centre, centre_measures(centre, axis, noisy_eta, radius, kappa, Lambda), kappa, Lambda)
+    per_axis = np.sqrt(np.mean(np.var(noisy, axis=0)))
+    assert per_axis == pytest.approx(reflected_noise_std(radius, sigma), rel=0.05)
+    with pytest.raises(ValueError, match="sigma_angle"):
+        reflected_noise_std(radius, -1.0)  # negative noise

@@ -52,7 +52,7 @@ def test_setpoint_is_on_the_circle_with_the_feed_forward_velocity():
     assert np.linalg.norm(sp.position - centre) == pytest.approx(15.0)
     np.testing.assert_allclose(sp.velocity, velocity + 15.0 * 0.2 * np.array([-math.sin(0.5), math.cos(0.5)]))
     ahead = spacing_setpoint(centre, velocity, theta=0.5, rate=0.2, radius=15.0, lead=2.0)
-    assert np.linalg.norm(ahead.position - (centre + 2.0 * velocity)) == pytest.approx(15.0)
+    np.testing.assert_allclose(ahead.position, centre + 15.0 * np.array([math.cos(0.9), math.sin(0.9)]))
     fast = spacing_setpoint(centre, np.array([30.0, 0.0]), theta=0.0, rate=0.5, radius=15.0)
     assert np.linalg.norm(fast.velocity) == pytest.approx(MAX_SPEED)
 
@@ -70,3 +70,11 @@ def test_setpoint_is_on_the_circle_with_the_feed_forward_velocity():
 def test_bad_inputs(call, named):
     with pytest.raises(ValueError, match=named):
         call()
+
+
+def test_spacing_still_acts_when_the_speed_cap_binds():
+    """A centre at 11.3 m/s on a 30 m circle leaves θ̇_max = (13 - 11.3) / 30: the nominal rate drops to θ̇_max / 2,
+    so a UAV with a wide gap ahead still speeds up and one with a wide gap behind still slows down."""
+    cap = (MAX_SPEED - 11.3) / 30.0
+    rate = spacing_rate(np.array([3.0, 1.0, 0.1]), np.array([0.1, 1.0, 3.0]), 30.0, 0.05, 11.3, k_theta=0.01)
+    np.testing.assert_allclose(rate, [cap / 2 + 0.0145, cap / 2, cap / 2 - 0.0145])
