@@ -6,6 +6,8 @@ bad matrix coming off the wire or out of a config file is rejected before it tou
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from fusion import lapack
@@ -14,6 +16,15 @@ from fusion import lapack
 #: Chosen here: loose enough for matrices that went through a few float64 operations.
 SYMMETRY_RTOL = 1e-8
 PSD_RTOL = 1e-9
+
+
+def positive(name: str, value) -> float:
+    """``value`` as a float if it is a positive finite number, else ``ValueError`` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return float(value)
 
 
 def as_vector(value, name: str, size: int | None = None) -> np.ndarray:

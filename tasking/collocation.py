@@ -56,7 +56,7 @@ from numbers import Real
 import numpy as np
 from scipy.optimize import minimize
 
-from fusion.validation import as_vector
+from fusion.validation import as_vector, positive
 
 GRAVITY = 9.80665  # m/s^2
 #: The default wind: still air (read-only).
@@ -65,11 +65,6 @@ NO_WIND.flags.writeable = False
 #: A solve is accepted if its largest defect is below this (m/s or rad/s); chosen here.
 DEFECT_TOL = 1e-4
 
-
-def _positive(name: str, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, Real) or not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return float(value)
 
 
 @dataclass(frozen=True)
@@ -86,17 +81,17 @@ class VehicleLimits:
     def __post_init__(self):
         if not (isinstance(self.min_speed, Real) and math.isfinite(self.min_speed) and self.min_speed >= 0):
             raise ValueError(f"min_speed must be a non-negative finite number, got {self.min_speed!r}")
-        if _positive("max_speed", self.max_speed) <= self.min_speed:
+        if positive("max_speed", self.max_speed) <= self.min_speed:
             raise ValueError(f"max_speed ({self.max_speed}) must exceed min_speed ({self.min_speed})")
         for name in ("max_accel", "max_turn_rate", "max_lateral_accel"):
-            _positive(name, getattr(self, name))
+            positive(name, getattr(self, name))
 
     @classmethod
     def fixed_wing(cls, airspeed: float = 18.0, max_bank: float = math.radians(35.0), speed_band: float = 0.2,
                    max_accel: float = 1.0) -> VehicleLimits:
         """A fixed wing (defaults of ``agent.vehicles.fixed_wing``): airspeed ``airspeed (1 ± speed_band)``,
         bank ``|φ| <= max_bank`` i.e. ``|ω| V <= g tan φ_max``; the band and ``max_accel`` are chosen here."""
-        airspeed, max_bank = _positive("airspeed", airspeed), _positive("max_bank", max_bank)
+        airspeed, max_bank = positive("airspeed", airspeed), positive("max_bank", max_bank)
         if max_bank >= math.pi / 2:
             raise ValueError(f"max_bank must be below 90 degrees, got {math.degrees(max_bank):.1f}")
         if not 0 < speed_band < 1:
@@ -131,7 +126,7 @@ class PlannerConfig:
     def __post_init__(self):
         for name in ("horizon", "altitude", "footprint_radius", "bearing_sigma", "measurement_rate",
                      "footprint_weight", "control_weight", "tolerance"):
-            _positive(name, getattr(self, name))
+            positive(name, getattr(self, name))
         for name, least in (("nodes", 2), ("max_iterations", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < least:
@@ -193,7 +188,7 @@ def accumulated_information(vehicle_ne, target_ne, dt: float, config: PlannerCon
     path = np.asarray(vehicle_ne, dtype=float)
     if path.ndim != 2 or path.shape[1] != 2 or not np.all(np.isfinite(path)):
         raise ValueError(f"vehicle_ne must be a finite (T, 2) array, got shape {path.shape}")
-    dt = _positive("dt", dt)
+    dt = positive("dt", dt)
     b = bearing_information(path, target_ne, config.bearing_sigma, config.altitude)
     return config.measurement_rate * dt * b.sum(axis=0)
 
@@ -568,7 +563,7 @@ class RecedingHorizonPlanner:
     def __init__(self, limits: VehicleLimits, config: PlannerConfig = PlannerConfig(), replan_period: float = 2.0,
                  wind=(0.0, 0.0), orbit_start: bool | None = None):
         self.limits, self.config = limits, config
-        self.replan_period = _positive("replan_period", replan_period)
+        self.replan_period = positive("replan_period", replan_period)
         if self.replan_period > config.horizon:
             raise ValueError(f"replan_period ({replan_period}) must not exceed the horizon ({config.horizon})")
         self.wind = as_vector(wind, "wind", 2)

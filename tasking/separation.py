@@ -46,17 +46,12 @@ from numbers import Real
 
 import numpy as np
 
-from fusion.validation import as_vector
+from fusion.validation import as_vector, positive
 
 #: Dykstra iterations at most, and the change below which they stop (m/s); chosen here.
 DYKSTRA_ITERATIONS = 100
 DYKSTRA_TOL = 1e-12
 
-
-def _positive(name: str, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, Real) or not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return float(value)
 
 
 @dataclass(frozen=True)
@@ -70,15 +65,15 @@ class SeparationLayer:
     swirl: float = 0.5  # right-turn share of the repulsion (chosen here)
 
     def __post_init__(self):
-        _positive("d_min", self.d_min)
-        _positive("max_speed", self.max_speed)
-        _positive("gain", self.gain)
+        positive("d_min", self.d_min)
+        positive("max_speed", self.max_speed)
+        positive("gain", self.gain)
         if isinstance(self.swirl, bool) or not isinstance(self.swirl, Real) or not (
             math.isfinite(self.swirl) and self.swirl >= 0
         ):
             raise ValueError(f"swirl must be a non-negative finite number, got {self.swirl!r}")
         radius = 2.0 * self.d_min if self.influence_radius is None else self.influence_radius
-        if _positive("influence_radius", radius) <= self.d_min:
+        if positive("influence_radius", radius) <= self.d_min:
             raise ValueError(f"influence_radius ({radius}) must exceed d_min ({self.d_min})")
         object.__setattr__(self, "influence_radius", float(radius))
 
@@ -124,7 +119,7 @@ class SeparationLayer:
         """
         own, others = _check_positions(own_position, neighbours)
         command = as_vector(own_velocity_cmd, "own_velocity_cmd", own.shape[0])
-        dt = _positive("dt", dt)
+        dt = positive("dt", dt)
         speed = float(np.linalg.norm(command))
         velocity = command * (self.max_speed / speed) if speed > self.max_speed else command.copy()
         rel = own - others
@@ -209,7 +204,7 @@ class SeparationStats:
 
 def separation_stats(trajectory, d_min: float) -> SeparationStats:
     """:class:`SeparationStats` of a ``(T, N, D)`` array of positions (T samples of N agents)."""
-    d_min = _positive("d_min", d_min)
+    d_min = positive("d_min", d_min)
     positions = np.asarray(trajectory, dtype=float)
     if positions.ndim != 3 or positions.shape[1] < 2:
         raise ValueError(f"trajectory must be (T, N >= 2, D), got shape {positions.shape}")
@@ -238,7 +233,7 @@ def fly_swarm(starts, goals, max_speed: float, dt: float, steps: int, layer: Sep
     targets = np.asarray(goals, dtype=float)
     if positions.ndim != 2 or targets.shape != positions.shape:
         raise ValueError(f"starts and goals must both be (N, D), got {positions.shape} and {targets.shape}")
-    max_speed, dt = _positive("max_speed", max_speed), _positive("dt", dt)
+    max_speed, dt = positive("max_speed", max_speed), positive("dt", dt)
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     out = np.empty((steps + 1, *positions.shape))

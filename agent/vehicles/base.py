@@ -28,7 +28,7 @@ from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
-from fusion.validation import as_vector
+from fusion.validation import as_vector, positive
 from tasking.orbit import Goal
 
 GRAVITY = 9.80665  # m/s^2
@@ -113,15 +113,6 @@ def orbit_vector_field(rel_ne: np.ndarray, radius: float, direction: int, speed:
     k = -speed / (rho * (rho * rho + r * r))
     d = rho * rho - r * r
     return np.array([k * (x * d + direction * y * 2.0 * rho * r), k * (y * d - direction * x * 2.0 * rho * r)])
-
-
-def positive(name: str, value) -> float:
-    """``value`` as a float if it is a positive finite number, else ``ValueError`` naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return float(value)
 
 
 def _check_dt(dt) -> float:
