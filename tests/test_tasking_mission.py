@@ -103,6 +103,7 @@ def test_bad_input_is_refused(bad, match):
         bad()
 
 
+@pytest.mark.slow  # a benchmark run
 def test_bench_quick_run_reports_finite_numbers(tmp_path):
     result = bench.run(quick=True, repeats=1)
     assert result["benchmark"] == "tasking-health"

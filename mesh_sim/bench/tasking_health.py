@@ -30,7 +30,7 @@ from mesh_sim.tasking_mission import MODES, MissionConfig, MissionResult, monte_
 NAME = "tasking-health"
 PART = "health"
 FULL_RUNS, QUICK_RUNS = 20, 2
-QUICK_DURATION_S = 300.0
+QUICK_DURATION_S = 240.0
 SEED = 2024
 THESIS = {  # [THESIS] §4.4, Figs. 4-3 / 4-4 (spec 000 §4.3)
     "nominal": {"median_service_s": 18.8, "mean_service_s": 21.3, "lost_per_run": 5.0},
