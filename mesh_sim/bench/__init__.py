@@ -105,7 +105,8 @@ BENCHMARKS: dict[str, Benchmark] = {
         Benchmark(
             "tasking",
             "mesh_sim.bench.tasking",
-            "issue 13's tasking benchmarks in one run: tasking-fleet, tasking-orbit, tasking-paths, tasking-feature "
+            "issue 13's tasking benchmarks in one run: tasking-fleet, tasking-health, tasking-orbit, tasking-paths, "
+            "tasking-feature "
             "(and their goals)",
         ),
         Benchmark(
@@ -113,6 +114,12 @@ BENCHMARKS: dict[str, Benchmark] = {
             "mesh_sim.bench.tasking_fleet",
             "default scenario, lockstep: consensus assignment vs the placeholder planner (per-target oracle RMSE, "
             "fleet ÷ oracle, coverage) and assignment agreement under 30 % loss",
+        ),
+        Benchmark(
+            "tasking-health",
+            "mesh_sim.bench.tasking_health",
+            "thesis 000 §4.4: nominal vs health-extended RHTA, 20 vehicles, Poisson failures, 20 Monte-Carlo missions "
+            "(median/mean service time, vehicles lost)",
         ),
         Benchmark(
             "tasking-orbit",
