@@ -8,7 +8,9 @@ seeds for both planners, measured in the same run:
 * **assignment** (the default scenario's planner, :mod:`tasking.assignment`): CBBA over the mesh gives each
   target one agent, which orbits it at 15 m; the others sweep search cells.
 
-Per target: the oracle's RMSE (the centralized filter over every bearing, so it measures what the paths let
+The cost of planning shows as the lockstep wall time per agent step of both runs (the whole agent: sensing,
+tracking, messages, planning), and safety as the closest two UAVs came. Per target: the oracle's RMSE (the
+centralized filter over every bearing, so it measures what the paths let
 the cameras see) and the fleet's (the RMS over agents of each agent's RMSE) ÷ the oracle's; **coverage**, the
 share of the time after the target's first track during which some agent believes *itself* assigned to it.
 Then the assignment under **30 % message loss**: the share of time all agents hold the same map of who
@@ -86,9 +88,11 @@ def run(quick: bool = False, repeats: int | None = None, runs_dir=None, duration
             for planner, overrides in (("placeholder", {"tasking": BASELINE}), ("assignment", {})):
                 metrics = _lockstep(runs, seed, duration, **overrides)
                 coverage = _coverage(metrics) if planner == "assignment" else {}
+                cpu = float(np.mean([a["cpu_per_step_ms"] for a in metrics["agents"]]))
+                closest = metrics["oracle"].get("separation", {}).get("closest_m")
                 for target, numbers in _per_target(metrics).items():
                     rows.append({"seed": seed, "planner": planner, "target": target, **numbers,
-                                 "coverage": coverage.get(target)})
+                                 "coverage": coverage.get(target), "cpu_per_step_ms": cpu, "closest_m": closest})
             lossy = _lockstep(runs, seed, duration, radio={"loss": LOSS})
             lines = {a["id"]: a["assignment"]["timeline"] for a in lossy["agents"]}
             end = max(a["assignment"]["evaluated_until"] for a in lossy["agents"])
@@ -139,6 +143,15 @@ def report(result: dict, console=None) -> None:
           common.fmt_ratio(_mean(rows, "placeholder", t, "ratio")),
           common.fmt_ratio(_mean(rows, "assignment", t, "ratio")),
           common.fmt(_mean(rows, "assignment", t, "coverage"), ".0%")) for t in targets])
+    common.print_table(
+        console, "cost and safety (lockstep wall time per agent step; closest approach of two UAVs)",
+        ["planner", "ms per agent step", "÷ placeholder", "closest approach"],
+        [(p, common.fmt_ms(_mean(rows, p, targets[0], "cpu_per_step_ms")),
+          common.fmt_ratio(_ratio(_mean(rows, p, targets[0], "cpu_per_step_ms"),
+                                  _mean(rows, "placeholder", targets[0], "cpu_per_step_ms"))),
+          common.fmt(min((r["closest_m"] for r in rows if r["planner"] == p and r["closest_m"] is not None),
+                         default=None), ".1f", " m"))
+         for p in ("placeholder", "assignment")] if targets else [])
     common.print_table(
         console, f"assignment agreement at {LOSS:.0%} message loss",
         ["seed", "time all agree", "changes", f"settled within {WINDOW:g} s", "conflicts resolved"],
