@@ -32,5 +32,12 @@ def report(result: dict, console=None) -> None:
     for module, part in result["parts"].items():
         _part(module).report(part, console)
     common.print_table(console, "tasking: every goal", ["goal", "target", "measured", "met"],
-                       [(g["name"], g["target"], common.fmt(g["measured"], ".3g") if isinstance(g["measured"], float)
-                         else g["measured"], common.verdict(g["met"])) for g in result["goals"]])
+                       [(g["name"], g["target"], _measured(g["measured"]), common.verdict(g["met"]))
+                        for g in result["goals"]])
+
+
+def _measured(value) -> str:
+    """A goal's measured value: numbers to 3 significant digits, a list of them joined."""
+    if isinstance(value, list | tuple):
+        return ", ".join(_measured(v) for v in value)
+    return common.fmt(value, ".3g") if isinstance(value, float) else str(value)
