@@ -63,7 +63,7 @@ def feature_from_path(path) -> PolynomialPath:
     if not points_ok:
         raise ValueError(f"tasking.path must be a list of [north, east] points in metres, got {path!r}")
     try:
-        return fit_feature(np.array(path, dtype=float))
+        return fit_feature(np.array(path, dtype=float).reshape(-1, 2))  # an empty list too: (0, 2)
     except ValueError as err:
         raise ValueError(f"tasking.path: {err}") from None
 
