@@ -1,12 +1,11 @@
 """One UAV: the loop of DESIGN.md §4, stepped by simulation time — a host for plug-ins.
 
-``Agent.step(t)`` reads the vehicle; every sensor measures (:class:`agent.plugins.Sensor`; simulated ones
-see the step's truth first); every belief exchange absorbs the observations it uses
-(:class:`agent.plugins.BeliefExchange`); received messages are decoded, validated and dispatched to the
-exchange of their kind; telemetry goes out to the ground station and topology reports to the peers (when
-due); every exchange offers its message, sealed and charged to the
-link budget here; the planner turns the exchanges' views into a goal for the vehicle. The loop names no
-implementation: sensors, exchanges, planners and vehicles come from their registries.
+``Agent.step(t)`` reads the vehicle; every sensor measures (:class:`agent.plugins.Sensor`; simulated ones see the
+step's truth first); every belief exchange absorbs the observations it uses (:class:`agent.plugins.BeliefExchange`);
+received messages are decoded, validated and dispatched to the exchange of their kind; telemetry goes out to the
+ground station and topology reports to the peers (when due); every exchange offers its message, sealed and charged to
+the link budget here; the planner turns the exchanges' views into a goal for the vehicle and the sensors
+(``look_at``). The loop names no implementation: sensors, exchanges, planners and vehicles come from their registries.
 
 It knows nothing of clocks or processes: the live harness (``agent.runtime``) calls it on the wall clock
 over Zenoh; the lockstep harness calls it over an in-memory bus. Only the transport and the clock differ.
@@ -78,9 +77,7 @@ class Agent:
         self.bytes_rx: Counter = Counter()  # (peer, kind) -> bytes
         self.rejected: Counter = Counter()  # reason -> messages
         self.fusions = FusionLog(silence_s=2 * scenario.sending.max_silence)
-        self.telemetry_thinned = 0
-        self.steps = 0
-        self._seq = 0
+        self.telemetry_thinned = self.steps = self._seq = 0
         self._last_seq: dict[tuple[str, str], int] = {}  # (origin, kind) -> last seq accepted
         self._logged: set[tuple[str, str]] = set()
 
@@ -111,6 +108,8 @@ class Agent:
             self._offer(exchange, t, neighbours)
         goal = self.planner.plan(state, Views(self.exchanges))
         self.vehicle.set_setpoint(goal_to_setpoint(goal))
+        for sensor in self.sensors:
+            sensor.point(goal.look_at)  # the gimbal command, for the next step's measurements
         self.vehicle.step(self.scenario.step)
         for exchange in self.exchanges.values():
             exchange.evaluate(t, truth)
@@ -238,8 +237,8 @@ class Agent:
             "sensor": sensor,
             "sensor_outcomes": dict(Counter(sensor["outcomes"]) + self.unused),
         }
-        for exchange in self.exchanges.values():
-            out.update(exchange.metrics())
+        for part in (*self.exchanges.values(), self.planner):  # a planner's metrics are optional
+            out.update(getattr(part, "metrics", dict)())
         return out
 
 

@@ -17,7 +17,8 @@ transport      :class:`Transport`                           ``agent/net/``: Zeno
 One step of the host: read the vehicle; every sensor measures (simulated ones first get the step's
 :class:`~agent.sensors.truth.TruthSnapshot`); every exchange absorbs the observations it uses; received
 messages are dispatched to the exchange of their kind; telemetry goes out; every exchange offers its
-message; the planner turns the exchanges' views into a goal.
+message; the planner turns the exchanges' views into a goal, whose gimbal command (``look_at``) every sensor
+is handed (:meth:`Sensor.point`).
 """
 
 from __future__ import annotations
@@ -57,6 +58,11 @@ class Sensor(Protocol):
     def on_truth(self, truth: TruthSnapshot) -> None: ...
 
     def measure(self, t: float, state) -> Observations: ...
+
+    def point(self, look_at) -> None:
+        """The planner's gimbal command of this step (``tasking.orbit.Goal.look_at``: a NED point, or ``None``),
+        for the next measurements; a sensor without a steerable gimbal ignores it."""
+        ...
 
     def telemetry(self) -> dict: ...
 

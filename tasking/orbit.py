@@ -31,7 +31,9 @@ class Goal:
     ``position`` (3,) NED is the point to fly to. If ``orbit_center`` (north, east) is given the goal
     is to circle it at ``orbit_radius`` in ``orbit_direction`` (+1 clockwise from above, -1
     anticlockwise), at the depth ``position[2]``; ``position[:2]`` is then the centre. ``speed`` is an
-    optional speed limit in m/s (``None``: the vehicle's own cruise/max speed).
+    optional speed limit in m/s (``None``: the vehicle's own cruise/max speed). ``look_at`` (3,) NED is an
+    optional gimbal command, "point the camera here" (``None``: the sensors keep their own pointing; spec 003
+    §2.9: the GNC computer sends the gimbal its reference).
     """
 
     position: np.ndarray
@@ -39,6 +41,7 @@ class Goal:
     orbit_radius: float | None = None
     orbit_direction: int = 1
     speed: float | None = None
+    look_at: np.ndarray | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "position", as_vector(self.position, "goal position", 3))
@@ -55,6 +58,8 @@ class Goal:
             raise ValueError(f"orbit_direction must be +1 or -1, got {self.orbit_direction}")
         if self.speed is not None and not (math.isfinite(self.speed) and self.speed > 0):
             raise ValueError(f"speed must be a positive number of m/s or None, got {self.speed}")
+        if self.look_at is not None:
+            object.__setattr__(self, "look_at", as_vector(self.look_at, "goal look_at (NED)", 3))
 
     @property
     def is_orbit(self) -> bool:

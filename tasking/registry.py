@@ -3,8 +3,9 @@
 ``planner = "placeholder"`` (default; :class:`tasking.planner.PlaceholderPlanner`: search its lane, then
 orbit a confirmed track) or ``"entropy"`` (:class:`tasking.entropy.EntropyPlanner`: the information-gain
 explorer of Merino (4.21)-(4.24) over the agent's fire map) or ``"assignment"``
-(:class:`tasking.assignment.AssignmentPlanner`: serve the task the fleet agreed on by consensus, CBBA).
-The other keys of the section are that
+(:class:`tasking.assignment.AssignmentPlanner`: serve the task the fleet agreed on by consensus, CBBA) or
+``"feature"`` (:class:`tasking.feature_planner.FeaturePlanner`: follow an operator's feature polyline with the
+camera on it, spec 003). The other keys of the section are that
 planner's parameters; unknown keys, wrong types and a planner whose views the agent does not hold are
 errors with the key's name, found when the scenario is read.
 
@@ -21,6 +22,7 @@ from numbers import Real
 from tasking.assignment import AssignmentConfig, AssignmentPlanner
 from tasking.base import Planner
 from tasking.entropy import EntropyPlanner, EntropyPlannerConfig
+from tasking.feature_planner import FeaturePlanner, FeaturePlannerConfig
 from tasking.planner import PlaceholderPlanner
 
 DEFAULT_PLANNER = "placeholder"
@@ -55,6 +57,10 @@ def _entropy(options: dict, ctx: PlanningContext) -> Planner:
     return EntropyPlanner(EntropyPlannerConfig(pd=pd, pf=pf, **options), ctx.area, ctx.altitude)
 
 
+def _feature(options: dict, ctx: PlanningContext) -> Planner:
+    return FeaturePlanner(FeaturePlannerConfig.from_options(options), ctx.area, ctx.altitude, ctx.max_speed)
+
+
 @dataclass(frozen=True)
 class PlannerEntry:
     build: Callable[[dict, PlanningContext], Planner]
@@ -74,6 +80,9 @@ PLANNERS: dict[str, PlannerEntry] = {
     "entropy": PlannerEntry(_entropy, "grid", {
         f.name: (int if f.name == "horizon" else _NUMBER) for f in fields(EntropyPlannerConfig)
         if f.name not in ("pd", "pf")}),  # P_D and P_F are the grid sensor's ([grid] pd, pf)
+    "feature": PlannerEntry(_feature, "track", {
+        f.name: {"path": list, "look_at": str}.get(f.name, _NUMBER) for f in fields(FeaturePlannerConfig)},
+        FeaturePlannerConfig.from_options),
 }
 
 

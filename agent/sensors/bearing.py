@@ -86,6 +86,10 @@ class BearingSource:
     def telemetry(self) -> dict:
         return {"video_quality": self.video_quality}
 
+    def point(self, look_at) -> None:
+        """A planner's gimbal command (``Goal.look_at``, NED, or ``None``): ignored by a sensor without a
+        gimbal to steer."""
+
 
 class GeometricBearingSensor(BearingSource):
     """Detects the targets inside a down-looking cone and within range, with noise, misses and clutter."""

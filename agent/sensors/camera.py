@@ -34,6 +34,18 @@
    whose pixel it matches (simulation only: the centralized oracle associates by it; the agent never
    looks at it).
 
+**Gimbal.** ``gimbal = "fixed"`` (default) keeps the configured pan and tilt. ``gimbal = "steered"`` points the
+camera where the planner says (the agent hands every sensor its goal's ``look_at``, :meth:`CameraSensor.point`;
+spec 003 §2.9: the GNC computer sends the gimbal its reference): before each capture the reference
+``(pan, tilt)`` that puts the point on the optical axis is recomputed from the vehicle's attitude at the
+capture time (:func:`tasking.gimbal.point_at`: ``d = R_bbᵀ R_nbᵀ (p_T - c)/‖·‖``, ``pan = atan2(d_y, d_x)``,
+``tilt = atan2(-d_z, hypot(d_x, d_y))``, the paper's inertial stabilisation in angle form; the true attitude,
+which the gimbal's own sensor head measures) and the servos move toward it for the time since the last
+capture at most at ``gimbal_rate`` (:func:`tasking.gimbal.slew`). The frame is rendered, and the pose
+telemetry stamped, with the angles reached. The *pointing error* of a frame is the angle between its optical
+axis and the line of sight to the commanded point (:func:`tasking.gimbal.off_axis_angle`); with the feature
+planner's ``look_at = "feature"`` it is the feature-centring error of spec 003 Eq. 13 (``|e|``).
+
 **Covariance** (first order, chosen here over the UT: one detection costs a few microseconds and the
 bearing function is smooth away from the zenith). Inputs ``x = (u, v, roll, pitch, yaw)`` with standard
 deviations ``(σ_px, σ_px, σ_att, σ_att, σ_att)``; the line of sight is ``ℓ = R_nb(φ, θ, ψ) M r(u, v)``
@@ -72,6 +84,15 @@ from perception.roi_render import render_roi
 from perception.rotations import rot_x, rot_y, rot_z
 from perception.scene import Target
 from perception.terrain import FlatTerrain
+from tasking.gimbal import (
+    CameraMounting,
+    GimbalAngles,
+    GimbalLimits,
+    VehiclePose,
+    off_axis_angle,
+    point_at,
+    slew,
+)
 
 log = logging.getLogger("skymesh.camera")
 
@@ -110,6 +131,45 @@ class CameraStats:
     outcomes: Counter = field(default_factory=Counter)  # reason -> frames or detections lost
 
 
+class SteeredGimbal:
+    """A gimbal that slews toward a commanded point (module docstring, **Gimbal**): its travel is that of
+    :class:`perception.pose.Gimbal` and its rates ``rate`` (rad/s)."""
+
+    def __init__(self, gimbal: Gimbal, mount: CameraMount, rate: float):
+        self.limits = GimbalLimits(gimbal.pan_limits, gimbal.tilt_limits, rate, rate)
+        self.mounting = CameraMounting(mount.R_body_from_base, mount.offset)
+        self.look_at: np.ndarray | None = None  # NED, the last command (None: hold)
+        self.errors: list[float] = []  # rad, pointing error of each steered frame
+        self.out_of_travel = 0  # captures whose command lay beyond the travel (the gimbal held)
+        self._t: float | None = None
+
+    def steer(self, t: float, state, gimbal: Gimbal) -> Gimbal:
+        """The gimbal at capture time ``t``: moved from ``gimbal`` toward the command for the time since the last
+        capture. A bad vehicle state leaves it where it is (the telemetry counts it)."""
+        dt, self._t = (0.0 if self._t is None else max(t - self._t, 0.0)), t
+        if self.look_at is None:
+            return gimbal
+        try:
+            pose = VehiclePose(state.position, state.roll, state.pitch, state.yaw)
+        except ValueError:
+            return gimbal
+        current = GimbalAngles(gimbal.pan, gimbal.tilt)
+        try:
+            desired = point_at(pose, self.look_at, self.limits, self.mounting, current)
+        except ValueError:  # beyond the tilt travel, or the camera at the point itself
+            self.out_of_travel += 1
+            return gimbal
+        angles = slew(current, desired, self.limits, dt)
+        self.errors.append(off_axis_angle(pose, angles, self.look_at, self.mounting))
+        return gimbal.command(angles.pan, angles.tilt)
+
+    def metrics(self) -> dict:
+        e = np.degrees(self.errors)
+        return {"mode": "steered", "out_of_travel": self.out_of_travel, "pointing_error_deg": {
+            "mean": float(e.mean()) if e.size else None, "p95": float(np.percentile(e, 95)) if e.size else None,
+            "max": float(e.max()) if e.size else None, "samples": int(e.size)}}
+
+
 class CameraSensor(BearingSource):
     """The camera pipeline behind ``detect(t, state, truth) -> [Bearing]``.
 
@@ -132,6 +192,8 @@ class CameraSensor(BearingSource):
         self.gimbal = Gimbal(config.pan, config.tilt)
         self.mount = CameraMount()
         self._M = self.mount.R_body_from_base @ self.gimbal.rotation  # camera -> body
+        self.steering = SteeredGimbal(self.gimbal, self.mount, config.gimbal_rate) if config.gimbal == "steered" \
+            else None
         self.degradation = config.degradation
         self.ground = None if source is not None else default_ground(config.ground)
         expected = (self.intrinsics.height, self.intrinsics.width, 3)
@@ -155,6 +217,8 @@ class CameraSensor(BearingSource):
         """Capture a frame at ``t`` from the vehicle ``state`` (a :class:`agent.vehicles.base.VehicleState`),
         detect, and return the bearings whose pose is known (this frame's, or earlier frames' that waited
         for a late pose). Never raises on bad frames or poses: they are counted in :attr:`outcomes`."""
+        if self.steering is not None:
+            self.gimbal = self.steering.steer(t, state, self.gimbal)
         self._telemetry(t, state)
         frame, labels = self._capture(t, state, truth)
         self.stats.frames += 1
@@ -171,6 +235,12 @@ class CameraSensor(BearingSource):
                 if len(pixels):
                     self._pending.append(_Pending(t, pixels, ids))
         return self._pair(t)
+
+    def point(self, look_at) -> None:
+        """Point a steered gimbal at ``look_at`` (NED; ``None``: hold) from the next capture on; a fixed one
+        ignores it."""
+        if self.steering is not None:
+            self.steering.look_at = None if look_at is None else np.array(look_at, dtype=float)
 
     @property
     def outcomes(self) -> Counter:
@@ -192,7 +262,13 @@ class CameraSensor(BearingSource):
             "false_per_frame": s.false_detections / s.frames_ok if s.frames_ok else None,
             "video_quality": self.video_quality, "video_failed": self.quality.failed,
             "outcomes": dict(s.outcomes),
+            **({} if self.steering is None else {"gimbal": self.steering.metrics()}),
         }
+
+    def telemetry(self) -> dict:
+        if self.steering is None:
+            return super().telemetry()
+        return {**super().telemetry(), "gimbal_pan": self.gimbal.pan, "gimbal_tilt": self.gimbal.tilt}
 
     def close(self) -> None:
         if self.source is not None:
@@ -203,7 +279,8 @@ class CameraSensor(BearingSource):
         """The simulated GPS/attitude report at ``t``: the true pose at ``t - gps_latency``, stamped ``t``."""
         c = self.config
         try:
-            self._truth_poses.add(t, state.position, state.roll, state.pitch, state.yaw, c.pan, c.tilt)
+            self._truth_poses.add(t, state.position, state.roll, state.pitch, state.yaw, self.gimbal.pan,
+                                  self.gimbal.tilt)
             true = self._truth_poses.at(t - c.gps_latency) if c.gps_latency > 0 else self._truth_poses.at(t)
         except PoseTooOld:
             return  # the first gps_latency seconds: no report has arrived yet

@@ -12,10 +12,12 @@ from dataclasses import dataclass
 from perception.camera import Intrinsics
 from perception.degradation import FAILURE_MODES, Degradation
 from perception.pose import Gimbal
+from tasking.gimbal import DEFAULT_RATE
 
 DETECTORS = ("color", "dark")
 RENDERS = ("roi", "full")
 TARGET_SHAPES = ("disc", "sphere")
+GIMBALS = ("fixed", "steered")
 
 
 @dataclass(frozen=True)
@@ -28,6 +30,8 @@ class CameraSensorConfig:
     hfov: float = math.radians(90.0)  # horizontal field of view [rad] (config: hfov_deg)
     pan: float = 0.0  # gimbal pan [rad] (config: pan_deg)
     tilt: float = -math.pi / 2  # gimbal tilt [rad]; -90 deg looks straight down (config: tilt_deg)
+    gimbal: str = "fixed"  # "fixed": pan/tilt stay as configured; "steered": slews to the planner's look_at
+    gimbal_rate: float = DEFAULT_RATE  # rad/s, a steered gimbal's servo rate limit (config: gimbal_rate_deg)
     detector: str = "color"  # "color" (Ross et al. HSV blobs) or "dark" (thesis 000 dark blobs)
     render: str = "roi"  # "roi": only what the detector needs (perception.roi_render); "full": the whole frame
     persistence: bool = False  # run detections through the persistent-object filter (thesis 000 §2.3)
@@ -54,6 +58,8 @@ class CameraSensorConfig:
             raise ValueError(f"sensor.render must be one of {RENDERS}, got {self.render!r}")
         if self.target_shape not in TARGET_SHAPES:
             raise ValueError(f"sensor.target_shape must be one of {TARGET_SHAPES}, got {self.target_shape!r}")
+        if self.gimbal not in GIMBALS:
+            raise ValueError(f"sensor.gimbal must be one of {GIMBALS}, got {self.gimbal!r}")
         if self.failed is not None and self.failed not in FAILURE_MODES:
             raise ValueError(f"sensor.failed must be none or one of {FAILURE_MODES}, got {self.failed!r}")
         if self.ground not in ("terrain", "tiles"):
@@ -67,7 +73,7 @@ class CameraSensorConfig:
             "banding_prob": 0 <= self.banding_prob <= 1, "speckle_rate": self.speckle_rate >= 0,
             "gps_latency": self.gps_latency >= 0, "pixel_sigma": self.pixel_sigma > 0,
             "attitude_sigma": self.attitude_sigma >= 0, "attitude_noise": self.attitude_noise >= 0,
-            "target_radius": self.target_radius > 0, "pan": True, "tilt": True,
+            "target_radius": self.target_radius > 0, "pan": True, "tilt": True, "gimbal_rate": self.gimbal_rate > 0,
         }
         for name, ok in checks.items():
             value = getattr(self, name)
@@ -90,10 +96,10 @@ class CameraSensorConfig:
     def from_dict(cls, d: dict) -> CameraSensorConfig:
         """From a scenario's ``[sensor]`` table (angles in degrees, named ``*_deg``)."""
         degrees = {"hfov_deg": "hfov", "pan_deg": "pan", "tilt_deg": "tilt", "attitude_sigma_deg": "attitude_sigma",
-                   "attitude_noise_deg": "attitude_noise"}
+                   "attitude_noise_deg": "attitude_noise", "gimbal_rate_deg": "gimbal_rate"}
         plain = {"width", "height", "detector", "render", "persistence", "edge_margin", "noise", "banding_prob",
                  "speckle_rate", "failed", "gps_latency", "latency_compensation", "pixel_sigma", "target_radius",
-                 "target_shape", "target_rgb", "ground", "pose_buffer"}
+                 "target_shape", "target_rgb", "ground", "pose_buffer", "gimbal"}
         unknown = set(d) - set(degrees) - plain - {"kind"}
         if unknown:
             raise ValueError(f"unknown camera sensor settings: {sorted(unknown)}")
@@ -113,7 +119,7 @@ class CameraSensorConfig:
                 kwargs[key] = None if value in (None, "none", "") else value
             elif key == "target_rgb":
                 kwargs[key] = tuple(int(c) for c in value)
-            elif key in ("detector", "render", "target_shape", "ground"):
+            elif key in ("detector", "render", "target_shape", "ground", "gimbal"):
                 kwargs[key] = value
             elif key in plain:
                 kwargs[key] = _number(value, key)

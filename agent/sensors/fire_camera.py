@@ -87,6 +87,9 @@ class ThermalSensor:
     def telemetry(self) -> dict:
         return {}
 
+    def point(self, look_at) -> None:
+        """A planner's gimbal command: ignored (the thermal camera keeps its configured pointing)."""
+
     def metrics(self) -> dict:
         return {"frames": self.camera.frames}
 
