@@ -10,8 +10,9 @@ seeds for both planners, measured in the same run:
 
 The cost of planning shows as the lockstep wall time per agent step of both runs (the whole agent: sensing,
 tracking, messages, planning), and safety as the closest two UAVs came. Per target: the oracle's RMSE (the
-centralized filter over every bearing, so it measures what the paths let the cameras see) and the fleet's (the RMS over agents of each agent's RMSE) ÷ the oracle's; **coverage**, the
-share of the time after the target's first track during which some agent believes *itself* assigned to it.
+centralized filter over every bearing, so it measures what the paths let the cameras see) and the fleet's
+(the RMS over agents of each agent's RMSE) ÷ the oracle's; **coverage**, the share of the time after the
+target's first track during which some agent believes *itself* assigned to it.
 Then the assignment under **30 % message loss**: the share of time all agents hold the same map of who
 serves which target, and for every change of any agent's map whether all agreed again within 3 s
 (:func:`agent.beliefs.assignment.agreement`); conflicts resolved by the consensus (Table 1 releases).
