@@ -20,7 +20,8 @@ i.e. :class:`fusion.measurement.Bearing2D` with the sensor at ``s_i``; the measu
 axis heading plus the camera bearing, ``ψ_i + η_i`` (004 §1.1). GPS noise (σ = 2 cm) is not modelled: at the
 orbit radius of 30 m it moves the bearing by 0.04°, a 0.15 % addition to ``σ²``.
 
-**One step** at the sampling instant ``t`` (every run of a Monte Carlo batch at once, :class:`fusion.batch.GaussianBatch`):
+**One step** at the sampling instant ``t``, every run of a Monte Carlo batch at once
+(:class:`fusion.batch.GaussianBatch`):
 
 1. prediction, Merino Alg. 3.2 (3.11)-(3.13), giving ``N(μ(t|t−1), P(t|t−1))`` (none at the first step);
 2. the extended information update of every UAV that sees the target, Merino (3.52), each linearised at the
@@ -40,9 +41,13 @@ in the first steps and, with the small process noise of E2 (which forgets slowly
 error for tens of seconds (measured: with n = 3, 40 runs, a steady-state NEES of thousands in a few runs). So
 while a run's predicted position standard deviation ``sqrt(tr P_pp / 2)`` exceeds :data:`ITERATE_ABOVE` (1 m),
 its step is the *iterated* EIF update (Bell & Cathey 1993: the iterated Kalman update is Gauss-Newton on
-``(x − μ̄)ᵀ Ȳ (x − μ̄) + Σ_i (z_i − h_i(x))² / σ²``): :data:`PASSES` passes, pass ``j`` linearising every bearing
-at ``μ^(j)``, ``μ^(0) = μ̄``, ``μ^(j+1)`` the posterior mean of pass ``j`` — in effect the pseudo-intersection of
-the first bearings with the prior. Once the track is within a metre, one pass per step: Merino (3.52) as is.
+``J(x) = (x − μ̄)ᵀ Ȳ (x − μ̄) + Σ_i (z_i − h_i(x))² / σ²``, ``(μ̄, Ȳ⁻¹)`` the prediction): :data:`PASSES`
+passes, pass ``j`` linearising every bearing at ``x_j`` (``x_0 = μ̄``) and giving the posterior mean ``x̂_j``; the
+next point is the best of ``x_j + α (x̂_j − x_j)``, ``α ∈ {1, ½, ¼, ⅛, 1/16, 0}``, by ``J`` (a line search:
+two short-baseline, nearly parallel first rays make the full Gauss-Newton step overshoot by hundreds of metres,
+measured). The result is the maximum a posteriori point of the prior and the first bearings — their
+pseudo-intersection — and the update is linearised there. Once the track is within a metre, one pass per step:
+Merino (3.52) as is.
 
 **Prior** (chosen here, stated): ``N([c_0; 0], diag(σ_p², σ_p², σ_v², σ_v²))`` with ``c_0`` the team's orbit
 centre at ``t = 0`` (the start of 004's approaching stage, 004 §6.1.1, which the team knows), ``σ_p = 18 m``
@@ -63,13 +68,15 @@ import numpy as np
 
 from fusion.batch import GaussianBatch
 from fusion.information_filter import discretised
+from fusion.measurement import wrap_angle
 from fusion.motion import ConstantVelocity
 from mesh_sim.orbit_experiments import SimResult
 
 PRIOR_POSITION_STD = 18.0  # [m] chosen here: 004's initial offset of the team's centre from the target
 PRIOR_VELOCITY_STD = 8.0  # [m/s] chosen here: the top of 004's E2 speed range, per axis
 ITERATE_ABOVE = 1.0  # [m] chosen here: iterate the update while the predicted position std exceeds this
-PASSES = 5  # chosen here: Gauss-Newton passes of the iterated update (measured: 3-5 settle, 10 can overshoot)
+PASSES = 5  # chosen here: Gauss-Newton passes of the iterated update
+STEPS = np.array([1.0, 0.5, 0.25, 0.125, 0.0625, 0.0])  # the line search's step lengths α
 
 
 @dataclass(frozen=True)
@@ -154,7 +161,8 @@ def track(result: SimResult, model, prior_mean: np.ndarray, prior_cov: np.ndarra
     F, Q, F_inv = discretised(model, float(result.times[1] - result.times[0]))
     Y0 = np.broadcast_to(np.linalg.inv(prior_cov), (runs, 4, 4))
     belief = GaussianBatch((Y0 @ prior_mean[..., None])[..., 0], Y0)  # y = P⁻¹ μ, Y = P⁻¹ (Merino (3.7)-(3.8))
-    R_inv = np.where(log.visible, sigma**-2, 0.0)[..., None, None]  # (R, T, n, 1, 1): no information unseen
+    weights = np.where(log.visible, sigma**-2, 0.0)  # R⁻¹ (R, T, n): no information from a UAV that does not see
+    R_inv = weights[..., None, None]
     shape = (runs, steps, 4)
     mean, predicted_mean = np.empty(shape), np.empty(shape)
     cov, predicted_cov = np.empty((*shape, 4)), np.empty((*shape, 4))
@@ -171,7 +179,30 @@ def track(result: SimResult, model, prior_mean: np.ndarray, prior_cov: np.ndarra
                 belief = belief.eif_update_bearing2d(
                     log.sensors[:, k, i], R_inv[:, k, i], log.azimuth[:, k, i, None], point
                 )
-            point = np.where(loose[:, None], belief.means(), point)  # the iterated update's next point
+            step = _line_search(
+                point,
+                belief.means(),
+                predicted_mean[:, k],
+                prior.Y,
+                log.sensors[:, k],
+                log.azimuth[:, k],
+                weights[:, k],
+            )
+            point = np.where(loose[:, None], step, point)
         cov[:, k] = np.linalg.inv(belief.Y)
         mean[:, k] = (cov[:, k] @ belief.y[..., None])[..., 0]
     return EifResult(result.times, mean, cov, predicted_mean, predicted_cov, log.target)
+
+
+def _line_search(point, gauss_newton, prior_mean, prior_info, sensors, azimuth, weights) -> np.ndarray:
+    """The best of ``x + α (x_GN − x)``, ``α`` in :data:`STEPS`, per run by the iterated update's objective
+    ``J(x) = (x − μ̄)ᵀ Ȳ (x − μ̄) + Σ_i w_i wrap(z_i − atan2(p_y − s_y, p_x − s_x))²`` (module docstring).
+
+    ``point``, ``gauss_newton``, ``prior_mean`` ``(R, 4)``, ``prior_info`` ``Ȳ`` ``(R, 4, 4)``, ``sensors``
+    ``(R, n, 2)``, ``azimuth`` ``z`` and ``weights`` ``w = σ⁻²`` (0 unseen) ``(R, n)``."""
+    candidates = point[:, None] + STEPS[:, None] * (gauss_newton - point)[:, None]  # (R, A, 4)
+    d = candidates[:, :, None, :2] - sensors[:, None]  # (R, A, n, 2)
+    residual = wrap_angle(azimuth[:, None] - np.arctan2(d[..., 1], d[..., 0]))  # z − h(x), h of Bearing2D
+    offset = candidates - prior_mean[:, None]
+    cost = np.einsum("rai,rij,raj->ra", offset, prior_info, offset) + np.sum(weights[:, None] * residual**2, -1)
+    return candidates[np.arange(len(point)), np.argmin(cost, axis=1)]
