@@ -173,12 +173,15 @@ def track(result: SimResult, model, prior_mean: np.ndarray, prior_cov: np.ndarra
         predicted_cov[:, k] = np.linalg.inv(prior.Y)
         predicted_mean[:, k] = point = (predicted_cov[:, k] @ prior.y[..., None])[..., 0]
         loose = np.trace(predicted_cov[:, k, :2, :2], axis1=-2, axis2=-1) > 2 * ITERATE_ABOVE**2
-        for _ in range(PASSES if loose.any() else 1):
+        passes = PASSES if loose.any() else 1
+        for done in range(1, passes + 1):
             belief = prior
             for i in range(n):  # Merino (3.52), every bearing of this instant linearised at one point
                 belief = belief.eif_update_bearing2d(
                     log.sensors[:, k, i], R_inv[:, k, i], log.azimuth[:, k, i, None], point
                 )
+            if done == passes:
+                break
             step = _line_search(
                 point,
                 belief.means(),
