@@ -36,7 +36,9 @@ Communication is the disk graph ``‖ξ_i - ξ_j‖ < C_r`` in synchronous round
    (§2.9, 200 x 200 m).
 
 The error of Eq. (1) is taken at the sampling instants, ``e_p(t) = p̂(t) - p(t)`` with ``p̂(t)`` the centre the
-UAVs orbit while measuring at ``t``.
+UAVs orbit while measuring at ``t``. Every UAV's reading of every step (GPS position, measured azimuth ``ψ_i + η_i``,
+visibility) is kept in :class:`BearingLog`, so another estimator can run on the same bearings
+(:mod:`mesh_sim.orbit_eif`: skymesh's centralized EIF).
 
 ``f = 3`` by default, so the static algorithm also sends 3 messages per step (the paper: "after five
 iterations the difference ... is negligible"; 3 is its message budget in Sec. 6).
