@@ -36,7 +36,9 @@ Communication is the disk graph ``‖ξ_i - ξ_j‖ < C_r`` in synchronous round
    (§2.9, 200 x 200 m).
 
 The error of Eq. (1) is taken at the sampling instants, ``e_p(t) = p̂(t) - p(t)`` with ``p̂(t)`` the centre the
-UAVs orbit while measuring at ``t``.
+UAVs orbit while measuring at ``t``. Every UAV's reading of every step (GPS position, measured azimuth ``ψ_i + η_i``,
+visibility) is kept in :class:`BearingLog`, so another estimator can run on the same bearings
+(:mod:`mesh_sim.orbit_eif`: skymesh's centralized EIF).
 
 ``f = 3`` by default, so the static algorithm also sends 3 messages per step (the paper: "after five
 iterations the difference ... is negligible"; 3 is its message budget in Sec. 6).
@@ -79,6 +81,7 @@ from tasking.centre_measure import (
     reflected_measures,
     reflected_noise_std,
     visible,
+    wrap_angle,
 )
 from tasking.circle_spacing import K_THETA, MAX_SPEED, OMEGA_0, cap_speed, circle_gaps, spacing_rate, spacing_setpoint
 from tasking.consensus import (
@@ -152,14 +155,32 @@ class OrbitConfig:
 
 
 @dataclass(frozen=True)
+class BearingLog:
+    """What every UAV's camera measured at every step, for an estimator that watches the same flight
+    (:mod:`mesh_sim.orbit_eif`): the GPS position of the sensor ``(R, T, n, 2)``, the measured azimuth of the line
+    of sight ``ψ_i + η_i`` (axis heading from the magnetometer plus the camera bearing, the angle from the first
+    axis towards the second, as :func:`fusion.measurement.Bearing2D`) ``(R, T, n)``, whether the target was in
+    the FOV ``(R, T, n)`` (the azimuth means nothing where it was not), its standard deviation
+    ``sqrt(σ_η² + σ_ψ²)`` [rad], and the truth ``p(t)`` ``(R, T, 2)``."""
+
+    sensors: np.ndarray
+    azimuth: np.ndarray
+    visible: np.ndarray
+    sigma: float
+    target: np.ndarray
+
+
+@dataclass(frozen=True)
 class SimResult:
     """``times (T,)``; per run, step and UAV: the centre error ``p̂_i - p`` ``(R, T, n, 2)``, the distance to
-    the target circle ``(R, T, n)`` and the stage ``(R, T, n)``."""
+    the target circle ``(R, T, n)`` and the stage ``(R, T, n)``; the bearings measured (``None`` for a result
+    assembled from parts)."""
 
     times: np.ndarray
     centre_error: np.ndarray
     circle_distance: np.ndarray
     stage: np.ndarray
+    bearings: BearingLog | None = None
 
 
 # ----------------------------------------------------------------------------------------- targets
@@ -223,6 +244,7 @@ def simulate(
     errors = np.empty((runs, steps, n, 2))
     circle = np.empty((runs, steps, n))
     stages = np.empty((runs, steps, n), dtype=np.int8)
+    sensors, azimuth, seen = np.empty((runs, steps, n, 2)), np.empty((runs, steps, n)), np.empty((runs, steps, n), bool)
     for k in range(steps):
         p = paths[:, k, None, :]  # (R, 1, 2)
         orbiting, stage_before = state.orbiting, state.stage
@@ -243,6 +265,7 @@ def simulate(
             look_at, axis_measured, eta_measured, np.linalg.norm(look_at - gps, axis=-1), c.kappa, c.Lambda
         )
         reflected = reflected_measures(look_at, m, c.kappa, c.Lambda)
+        sensors[:, k], azimuth[:, k], seen[:, k] = gps, wrap_angle(axis_measured + eta_measured), sees
         # --- 2. consensus WLS rounds
         P, q = wls_information(m, np.eye(2), sees)
         for _ in range(c.wls_iterations):
@@ -299,7 +322,8 @@ def simulate(
         waypoint = np.where(reached[..., None], _patrol_points(rng, (runs, n)), waypoint)
         goal = np.where(active[..., None], orbit.position, waypoint)  # where to be at t + Δt
         xi = xi + c.dt * cap_speed((goal - xi) / c.dt, c.max_speed)
-    return SimResult(np.arange(steps) * c.dt, errors, circle, stages)
+    log = BearingLog(sensors, azimuth, seen, math.hypot(c.sigma_bearing, c.sigma_yaw), paths.copy())
+    return SimResult(np.arange(steps) * c.dt, errors, circle, stages, log)
 
 
 def _slope(history: np.ndarray, dt: float) -> np.ndarray:

@@ -16,6 +16,17 @@ the dynamic algorithm uses σ_a = 2 m/s² (Bar-Shalom's rule of thumb, 0.5-1 tim
 m/s²): with the paper's σ_a = 0.01 m/s² a constant-velocity filter cannot follow the figure-8, which one extra row
 shows; E2 (a truly constant velocity) keeps the paper's 0.01 m/s². "≈" in the goals means within ±30 % (chosen here).
 Quick mode: 2 runs, n ∈ {3, 12}, v ∈ {0, 8}, shorter E2/E3 runs; full: 50 runs per configuration.
+
+**skymesh's estimator on the same bearings** (:mod:`mesh_sim.orbit_eif`): in every E1/E2 dynamic run, every UAV's
+bearing of every step also goes to skymesh's centralized extended information filter (Merino (3.52), what the
+``flood`` policy computes in every agent); the UAVs fly 004's orbits unchanged. Two motion models: skymesh's
+constant velocity with ``q = σ_a² Δt`` (the same motion assumption as 004's KCF) and the agents' shipped
+damped-velocity model (:class:`agent.beliefs.tracking_config.TrackerConfig`: speed std 5 m/s, τ = 10 s). Rows
+give the RMSE of ``μ(t|t)`` over the runs 004 kept, of ``μ(t|t−1)`` (from the bearings before ``t``, like 004's
+centre; but predicted over the step, which 004's centre is not), the position NEES (χ², 2 degrees of freedom if
+consistent) and the ratio EIF ÷ 004 dynamic. For a moving target that ratio includes 004's one-step lag ``|v| Δt``
+(0.57 m at v = 8 m/s, :mod:`mesh_sim.orbit_experiments`), which neither EIF estimate has. Informative: no goal
+(the paper has no such figure).
 """
 
 from __future__ import annotations
@@ -26,6 +37,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from agent.beliefs.tracking_config import TrackerConfig
+from fusion.motion import DampedVelocity
+from mesh_sim import orbit_eif
 from mesh_sim import orbit_experiments as oe
 from mesh_sim.bench import common
 
@@ -35,6 +49,7 @@ TOLERANCE = 0.30  # "≈": within ±30 % (chosen here)
 PAPER_E2 = {("static", 0.0): 0.27, ("static", 8.0): 0.9, ("dynamic", 0.0): 0.25, ("dynamic", 8.0): 0.62}
 PAPER_STEADY = {3: 4.0, 12: 1.0}  # seconds, upper bounds (004 §5.1)
 CIRCLE_GOAL = 1.0  # m: a UAV counts as on the target circle (chosen here)
+EIF_CV, EIF_DAMPED = "skymesh EIF, CV", "skymesh EIF, damped"  # the rows of skymesh's estimator
 
 
 def _modes(quick: bool, repeats: int | None) -> dict:
@@ -69,14 +84,58 @@ def _modes(quick: bool, repeats: int | None) -> dict:
     return base
 
 
-def _tracking_row(
-    experiment: str, algorithm: str, config: oe.OrbitConfig, target: str, runs: int, seed: int, speed: float = 0.0
-) -> dict:
+def _tracking_rows(
+    experiment: str,
+    algorithm: str,
+    config: oe.OrbitConfig,
+    target: str,
+    runs: int,
+    seed: int,
+    speed: float = 0.0,
+    eif: bool = False,
+) -> list[dict]:
     """RMSE and steady-state time over the runs that kept the target (final centre error below ``r``); the runs
     that lost it (the team ends up blind and searching) are counted apart, since one of them would dominate
-    any mean (the paper reports none)."""
+    any mean (the paper reports none). With ``eif``, the rows of skymesh's EIF on the same bearings follow."""
     result = oe.run_tracking(config, target, runs, seed, speed)
     kept = np.linalg.norm(result.centre_error[:, -1], axis=-1).max(axis=-1) < config.radius
+    row = _row_of(experiment, algorithm, config, runs, speed, result, kept)
+    if not eif:
+        return [row]
+    return [row, *(_eif_row(row, result, kept, name, model) for name, model in _eif_models(config).items())]
+
+
+def _eif_models(config: oe.OrbitConfig) -> dict:
+    """skymesh's two motion models for the EIF (module docstring)."""
+    agents = TrackerConfig()
+    return {
+        EIF_CV: orbit_eif.matched_model(config.sigma_a, config.dt),
+        EIF_DAMPED: DampedVelocity(spatial_dims=2, speed_std=agents.speed_std, tau=agents.tau),
+    }
+
+
+def _eif_row(dynamic: dict, result: oe.SimResult, kept: np.ndarray, name: str, model) -> dict:
+    """skymesh's EIF on the bearings of the dynamic run ``result``, scored on the runs 004 kept."""
+    estimate = orbit_eif.track(result, model, *orbit_eif.approach_prior(result))
+    row = {**dynamic, "algorithm": name, "rmse_predicted_m": math.nan, "nees_position": math.nan}
+    row["ratio_to_dynamic"] = math.nan
+    if kept.any():
+        sub = estimate.select(kept)
+        late = sub.times > oe.STEADY_STATE_FROM
+        row.update(
+            rmse_m=oe.steady_rmse(sub),
+            steady_state_s=oe.steady_state_time(sub),
+            rmse_predicted_m=oe.steady_rmse(sub.predicted()),
+            nees_position=float(sub.position_nees()[:, late].mean()),
+        )
+        row["ratio_to_dynamic"] = row["rmse_m"] / dynamic["rmse_m"]
+    return row
+
+
+def _row_of(
+    experiment: str, algorithm: str, config: oe.OrbitConfig, runs: int, speed: float, result: oe.SimResult, kept
+) -> dict:
+    """The row of one 004 algorithm: its centres' RMSE and steady-state time over the ``kept`` runs."""
     row = {
         "experiment": experiment,
         "algorithm": algorithm,
@@ -102,19 +161,19 @@ def run(quick: bool = False, repeats: int | None = None) -> dict:
     e1 = oe.OrbitConfig(duration=mode["e1_duration"])
     with common.progress(2 * len(mode["ns"]) + 2 * len(mode["speeds"]) + 3, NAME) as advance:
         for n in mode["ns"]:
-            rows.append(_tracking_row("E1", "static", replace(e1, n=n), "figure8", runs, seed=n))
+            rows += _tracking_rows("E1", "static", replace(e1, n=n), "figure8", runs, seed=n)
             advance(f"E1 static n={n}")
-            rows.append(
-                _tracking_row("E1", "dynamic", replace(e1, n=n, dynamic=True, sigma_a=E1_SIGMA_A), "figure8", runs, n)
+            rows += _tracking_rows(
+                "E1", "dynamic", replace(e1, n=n, dynamic=True, sigma_a=E1_SIGMA_A), "figure8", runs, n, eif=True
             )
-            advance(f"E1 dynamic n={n}")
+            advance(f"E1 dynamic n={n} and skymesh's EIF")
         if mode["paper_row"]:
-            rows.append(_tracking_row("E1", "dynamic, paper σ_a", replace(e1, n=5, dynamic=True), "figure8", runs, 5))
+            rows += _tracking_rows("E1", "dynamic, paper σ_a", replace(e1, n=5, dynamic=True), "figure8", runs, 5)
             advance("E1 dynamic with the paper's sigma_a")
         e2 = oe.OrbitConfig(n=5, duration=mode["e2_duration"])
         for v in mode["speeds"]:
             for algorithm, config in (("static", e2), ("dynamic", replace(e2, dynamic=True))):
-                rows.append(_tracking_row("E2", algorithm, config, "cv", runs, seed=100 + int(v), speed=v))
+                rows += _tracking_rows("E2", algorithm, config, "cv", runs, 100 + int(v), v, eif=config.dynamic)
                 advance(f"E2 {algorithm} v={v:g}")
         for algorithm, dynamic in (("static", False), ("dynamic", True)):
             result = oe.run_rendezvous(oe.rendezvous_config(duration=mode["e3_duration"], dynamic=dynamic), runs, 7)
@@ -162,6 +221,9 @@ def _parameters() -> dict:
         "approach_readings": tracking.approach_readings,
         "omega_0": tracking.omega_0,
         "k_theta": tracking.k_theta,
+        "eif_prior_std": [orbit_eif.PRIOR_POSITION_STD, orbit_eif.PRIOR_VELOCITY_STD],
+        "eif_iterate_above_m": orbit_eif.ITERATE_ABOVE,
+        "eif_passes": orbit_eif.PASSES,
     }
 
 
@@ -241,7 +303,7 @@ def report(result: dict, console=None) -> None:
         f"[bold]{NAME}[/bold]: Andreetto et al. 2018 (spec 004), {result['settings']['runs']} runs per "
         f"configuration, {result['elapsed_s']:.1f} s"
     )
-    e1 = [r for r in rows if r["experiment"] == "E1"]
+    e1 = [r for r in rows if r["experiment"] == "E1" and not r["algorithm"].startswith("skymesh")]
     common.print_table(
         console,
         "E1 figure-8 target: steady-state RMSE (t > 20 s) and steady-state time",
@@ -262,7 +324,7 @@ def report(result: dict, console=None) -> None:
         ],
         caption="Paper: RMSE vs n only in Fig. 4; dynamic with 5 UAVs ≈ static with 12.",
     )
-    e2 = [r for r in rows if r["experiment"] == "E2"]
+    e2 = [r for r in rows if r["experiment"] == "E2" and not r["algorithm"].startswith("skymesh")]
     common.print_table(
         console,
         "E2 constant-velocity target [v, v], n = 5: steady-state RMSE",
@@ -278,6 +340,7 @@ def report(result: dict, console=None) -> None:
             for r in e2
         ],
     )
+    _comparison_table(console, rows)
     e3 = [r for r in rows if r["experiment"] == "E3"]
     common.print_table(
         console,
@@ -304,6 +367,51 @@ def report(result: dict, console=None) -> None:
     )
     params = ", ".join(f"{k} = {v}" for k, v in result["parameters"].items())
     console.print(f"Parameters chosen here (not in the paper): {params}")
+
+
+def _comparison_table(console, rows: list[dict]) -> None:
+    """E1/E2 side by side: 004's two algorithms and skymesh's EIF on the dynamic runs' bearings."""
+    table = []
+    for r in rows:
+        if r["algorithm"] != "dynamic" or r["experiment"] not in ("E1", "E2"):
+            continue
+        static = _row(rows, r["experiment"], "static", r["n"], r["v"])
+        cv, damped = (_row(rows, r["experiment"], name, r["n"], r["v"]) for name in (EIF_CV, EIF_DAMPED))
+        table.append(
+            (
+                r["experiment"],
+                r["n"],
+                f"{r['v']:g}",
+                common.fmt(static["rmse_m"], ".3f"),
+                common.fmt(r["rmse_m"], ".3f"),
+                common.fmt(cv["rmse_m"], ".3f"),
+                common.fmt(cv["rmse_predicted_m"], ".3f"),
+                common.fmt(damped["rmse_m"], ".3f"),
+                common.fmt(cv["ratio_to_dynamic"], ".2f"),
+                common.fmt(damped["ratio_to_dynamic"], ".2f"),
+                f"{common.fmt(cv['nees_position'], '.2f')} / {common.fmt(damped['nees_position'], '.2f')}",
+            )
+        )
+    common.print_table(
+        console,
+        "E1/E2: 004 static, 004 dynamic, skymesh EIF (centralized, same bearings): steady-state RMSE [m]",
+        [
+            "exp.",
+            "n",
+            "v [m/s]",
+            "004 static",
+            "004 dynamic",
+            "EIF CV",
+            "EIF CV μ(t|t−1)",
+            "EIF damped",
+            "CV ÷ dyn.",
+            "damped ÷ dyn.",
+            "NEES CV / damped",
+        ],
+        table,
+        caption="EIF on the bearings of the 004 dynamic runs (kept runs); CV: q = σ_a² Δt (004's motion "
+        "assumption), damped: the agents' model. 004 static is its own flight. NEES: position, 2 if consistent.",
+    )
 
 
 def _fmt_measured(value) -> str:

@@ -22,10 +22,19 @@ def test_quick_run_is_well_formed(printed):
                 "rendezvous_time_median_s",
                 "rmse_m",
                 "steady_state_s",
+                "rmse_predicted_m",
+                "nees_position",
+                "ratio_to_dynamic",
             ):
                 assert math.isfinite(value), (key, row)
     assert result["goals"] and all({"name", "target", "measured", "met"} <= set(g) for g in result["goals"])
     assert all(isinstance(g["met"], bool) for g in result["goals"])
     text = printed(tasking_orbit, result)
     assert "E1 figure-8" in text and "Goals" in text and "kappa = 6.0" in text
+    assert "skymesh EIF (centralized, same bearings)" in text
+    eif = [r for r in result["rows"] if r["algorithm"] in (tasking_orbit.EIF_CV, tasking_orbit.EIF_DAMPED)]
+    dynamic = [r for r in result["rows"] if r["algorithm"] == "dynamic" and r["experiment"] != "E3"]
+    assert len(eif) == 2 * len(dynamic) == 2 * (len(result["settings"]["ns"]) + len(result["settings"]["speeds"]))
+    assert all(r["ratio_to_dynamic"] > 0 for r in eif if r["lost_runs"] == 0)
+    assert not any(g["name"].startswith("skymesh") for g in result["goals"])  # informative rows only
     assert all(math.isfinite(r["rmse_m"]) for r in result["rows"] if r.get("lost_runs") == 0 and "rmse_m" in r)
