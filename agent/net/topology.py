@@ -74,8 +74,11 @@ class Topology:
             known = self._reports.get(agent)
             self._reports[agent] = (float(when), frozenset(neighbours))
             self._news[agent] = sender
-            if known is None or known[1] != self._reports[agent][1] or t - known[0] > report_lifetime(self.timeout):
+            lifetime = report_lifetime(self.timeout)
+            if known is None or known[1] != self._reports[agent][1] or t - known[0] > lifetime:
                 self._version += 1  # the graph may differ: a beacon that repeats a fresh report leaves it
+            elif self._memo is not None and self._memo[0][0] - known[0] > lifetime >= self._memo[0][0] - when:
+                self._memo = None  # the report was stale at the memo's time and is fresh there now
 
     def outgoing(self, t: float) -> dict | None:
         """The topology message due at ``t``, or ``None``: our own report when our neighbours changed or a
