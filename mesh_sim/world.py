@@ -29,10 +29,12 @@ from mesh_sim.oracle import InFlightOracle, Oracle
 from mesh_sim.scenario import load
 from mesh_sim.target_set import truth_snapshot
 from perception.terrain import terrain_from_config
+from tasking.assignment import AssignmentConfig
 
 log = logging.getLogger("skymesh.world")
 
-REPORTED_SEPARATION = 10.0  # m: the separation counted when the scenario sets no [tasking] min_separation
+#: m: the separation counted when the scenario sets no ``[tasking] min_separation``: the assignment planner's default
+REPORTED_SEPARATION = AssignmentConfig.min_separation
 TRUTH_RATE_HZ = 10.0  # chosen here: agents extrapolate truth at constant velocity between snapshots
 
 
@@ -48,6 +50,7 @@ class World:
         self.seq = 0
         self.uavs: dict[str, list] = {}  # agent -> last reported position (the radio's range check uses it)
         self.closest: tuple[float, int, int] = (math.inf, 0, 0)  # (closest pair distance, violations, samples)
+        self.separation_limit = float(scenario.agent.tasking.get("min_separation", REPORTED_SEPARATION))
         self.now = 0.0
         sc = scenario.agent
         terrain = terrain_from_config(sc.terrain)
@@ -100,9 +103,9 @@ class World:
         positions = np.array(list(self.uavs.values()))
         i, j = np.triu_indices(len(positions), k=1)
         distances = np.linalg.norm(positions[i] - positions[j], axis=1)
-        limit = self.scenario.agent.tasking.get("min_separation", REPORTED_SEPARATION)
         closest, violations, samples = self.closest
-        self.closest = (min(closest, float(distances.min())), violations + int(np.count_nonzero(distances < limit)),
+        below = int(np.count_nonzero(distances < self.separation_limit))
+        self.closest = (min(closest, float(distances.min())), violations + below,
                         samples + 1)
 
     def _note_position(self, env: wire.Envelope) -> None:
@@ -128,7 +131,7 @@ class World:
         closest, violations, samples = self.closest
         if samples:
             out["separation"] = {"closest_m": closest, "violations": violations, "samples": samples,
-                                 "below_m": self.scenario.agent.tasking.get("min_separation", REPORTED_SEPARATION)}
+                                 "below_m": self.separation_limit}
         if self.oracle.imm is not None:
             out["imm_targets"] = self.oracle.imm_evaluator.summary()
         if self.in_flight is not None:

@@ -77,8 +77,8 @@ class AssignmentConfig:
             raise ValueError(f"tasking.capacity must be an integer, got {self.capacity}")
         if self.stickiness < 1:
             raise ValueError(f"tasking.stickiness must be ≥ 1, got {self.stickiness}")
-        if self.failure_burn < 1:
-            raise ValueError(f"tasking.failure_burn must be ≥ 1 (a failure burns faster), got {self.failure_burn}")
+        if self.failure_burn <= 1:
+            raise ValueError(f"tasking.failure_burn must be > 1 (a failure burns faster), got {self.failure_burn}")
         if self.search_value >= self.track_value:
             raise ValueError(f"tasking.search_value ({self.search_value}) must be below track_value "
                              f"({self.track_value}): a target in view comes before an area to search")
@@ -92,32 +92,40 @@ class AssignmentConfig:
         if self.flight_time <= 0:
             return None
         burn = 1.0 / self.flight_time  # k_fuel on a tank of capacity 1
-        return HealthModel(capacity=1.0, burn=burn, burn_failed=burn * max(self.failure_burn, 1.0 + 1e-9),
+        return HealthModel(capacity=1.0, burn=burn, burn_failed=burn * self.failure_burn,
                            failure_rate=self.failure_rate, refuel_time=self.refuel_time)
+
+
+def _cell_grid(area: Area, cell: float) -> tuple[float, float, float, float, int, int]:
+    """``area`` and the rows and columns of cells of about ``cell`` metres that tile it."""
+    n0, n1, e0, e1 = check_area(area)
+    return n0, n1, e0, e1, max(1, round((n1 - n0) / cell)), max(1, round((e1 - e0) / cell))
 
 
 def search_cells(area: Area, cell: float) -> dict[str, np.ndarray]:
     """The search cells' centres, keyed ``"search:<row>:<col>"``, tiling ``area`` with cells of about ``cell``."""
-    n0, n1, e0, e1 = check_area(area)
-    rows, cols = max(1, round((n1 - n0) / cell)), max(1, round((e1 - e0) / cell))
+    n0, n1, e0, e1, rows, cols = _cell_grid(area, cell)
     return {f"search:{r}:{c}": np.array([n0 + (r + 0.5) * (n1 - n0) / rows, e0 + (c + 0.5) * (e1 - e0) / cols])
             for r in range(rows) for c in range(cols)}
 
 
 def cell_area(area: Area, key: str, cell: float) -> tuple[float, float, float, float]:
     """The (north min, max, east min, max) of search cell ``key``."""
-    n0, n1, e0, e1 = check_area(area)
-    rows, cols = max(1, round((n1 - n0) / cell)), max(1, round((e1 - e0) / cell))
+    n0, n1, e0, e1, rows, cols = _cell_grid(area, cell)
     r, c = (int(x) for x in key.split(":")[1:])
     dn, de = (n1 - n0) / rows, (e1 - e0) / cols
     return (n0 + r * dn, n0 + (r + 1) * dn, e0 + c * de, e0 + (c + 1) * de)
 
 
-def fleet_tasks(tracks: Sequence[tuple[Hashable, np.ndarray]], cells: Mapping[str, np.ndarray],
+def search_tasks(cells: Mapping[str, np.ndarray], config: AssignmentConfig) -> dict[Hashable, Task]:
+    """One ``search:r:c`` task per cell (they never change: built once per agent)."""
+    return {key: Task(key, centre, config.search_value, "search") for key, centre in cells.items()}
+
+
+def fleet_tasks(tracks: Sequence[tuple[Hashable, np.ndarray]], searches: Mapping[Hashable, Task],
                 config: AssignmentConfig) -> dict[Hashable, Task]:
-    """The task set: one ``track:<id>`` task per confirmed track, one ``search:r:c`` task per cell."""
-    tasks: dict[Hashable, Task] = {key: Task(key, centre, config.search_value, "search")
-                                   for key, centre in cells.items()}
+    """The task set: the ``searches`` (:func:`search_tasks`) and one ``track:<id>`` task per confirmed track."""
+    tasks = dict(searches)
     for track_id, position in tracks:
         key = f"track:{track_id}"
         tasks[key] = Task(key, np.asarray(position, float)[:2], config.track_value, "track")
@@ -134,11 +142,9 @@ class AssignmentPlanner:
         self.config, self.area, self.altitude, self.step = config, check_area(area), float(altitude), float(step)
         speed = max_speed if max_speed is not None else config.cruise_speed
         self.layer = SeparationLayer(config.min_separation, speed) if config.min_separation > 0 else None
-        self.separations = 0  # cycles in which the layer changed the goal
         self._sweeps: dict[str, WaypointFollower] = {}
         self._hold: np.ndarray | None = None
         self.mode = "idle"
-        self.target_id: Hashable | None = None
 
     def plan(self, state: VehicleStateLike, views: Mapping[str, object]) -> Goal:
         view: AssignmentView = views["tasks"]
@@ -152,19 +158,15 @@ class AssignmentPlanner:
             return goal
         own = np.asarray(state.position, float)[:2]
         peers = np.array(list(view.peers.values()))
-        layer = self.layer
-        reach = max(layer.influence_radius, layer.d_min + 2 * layer.max_speed * self.step)
-        if np.min(np.hypot(*(peers - own).T)) >= reach:
+        if np.min(np.hypot(*(peers - own).T)) >= self.layer.reach(self.step):
             return goal
-        velocity = layer.adjust(own, np.asarray(state.velocity, float)[:2], peers, self.step)
-        self.separations += 1
+        velocity = self.layer.adjust(own, np.asarray(state.velocity, float)[:2], peers, self.step)
         speed = float(np.hypot(*velocity))
         return goto_goal(own + velocity * SEPARATION_LOOKAHEAD, self.altitude, speed if speed > 0.1 else None)
 
     def _serve(self, state: VehicleStateLike, view: AssignmentView) -> Goal:
         position = np.asarray(state.position, float)
         task = view.task
-        self.target_id = None if task is None else task.key
         if view.home:
             self.mode = "home"
             return goto_goal(view.base, self.altitude)

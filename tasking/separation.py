@@ -109,13 +109,17 @@ class SeparationLayer:
         _check_distinct(d)
         return np.sum(self.potential_derivative(d)[:, None] * rel / d[:, None], axis=0)  # ∇U = U'(d) (p - p_j) / d
 
+    def reach(self, dt: float) -> float:
+        """How far the layer acts for a command held ``dt`` s: ``max(R, d_min + 2 max_speed dt)``; beyond it
+        :meth:`adjust` only clips the command to ``max_speed``."""
+        return max(self.influence_radius, self.d_min + 2.0 * self.max_speed * dt)
+
     def adjust(self, own_position, own_velocity_cmd, neighbours, dt: float) -> np.ndarray:
         """The separated velocity command for this step.
 
         ``own_position`` (D,), ``own_velocity_cmd`` (D,) and ``neighbours`` (K, D) positions, D = 2 or 3
         (north, east[, down]), metres and m/s; ``dt`` the step [s] the command is held for. The command is
-        first clipped to ``max_speed``; it is returned unchanged when no neighbour is within
-        ``max(R, d_min + 2 max_speed dt)``.
+        first clipped to ``max_speed``; it is returned unchanged when no neighbour is within :meth:`reach`.
         """
         own, others = _check_positions(own_position, neighbours)
         command = as_vector(own_velocity_cmd, "own_velocity_cmd", own.shape[0])

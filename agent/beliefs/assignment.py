@@ -34,7 +34,7 @@ from agent.net import wire
 from agent.plugins import Outgoing, Views
 from agent.sensors.truth import TruthSnapshot
 from fusion.resync import Edge
-from tasking.assignment import AssignmentConfig, fleet_tasks, search_cells
+from tasking.assignment import AssignmentConfig, fleet_tasks, search_cells, search_tasks
 from tasking.base import AssignmentView
 from tasking.cbba import CBBA, Bids, path_score
 from tasking.health import VehicleHealth
@@ -58,11 +58,11 @@ class AssignmentExchange:
         self._video: float | None = None
         self.base = np.asarray(base, float)[:2]
         self.cells = search_cells(area, config.search_cell)
+        self.searches = search_tasks(self.cells, config)
         self.cbba = CBBA(me, config.capacity, config.stickiness)
         self.merges = 0
         self.tasks: dict[str, Task] = {}
         self.peers: dict[str, np.ndarray] = {}
-        self.home = False
         self._sent: tuple | None = None
         self._sent_at = -math.inf
         self.changes = 0  # times this agent's own task changed
@@ -83,7 +83,7 @@ class AssignmentExchange:
     def settle(self, t: float) -> None:
         """Rebuild the task set from the fused picture, update the sortie, and re-bid the bundle from where the
         vehicle is (a vehicle that is not flying its sortie bids for nothing: its tasks go to others)."""
-        self.tasks = fleet_tasks(self.views["track"].positions, self.cells, self.config)
+        self.tasks = fleet_tasks(self.views["track"].positions, self.searches, self.config)
         position = self.vehicle.state().position[:2]
         serving = self.cbba.path[0] if self.cbba.path else None
         if self.sortie is None:
@@ -91,7 +91,6 @@ class AssignmentExchange:
         else:
             state = self.sortie.update(t, position, self.base, self._video)
             me, bidding = self.sortie.capability(position, self.base), state == "flying"
-            self.home = state in ("home", "refuelling")
         self.cbba.rebuild(self.tasks if bidding else {}, path_score(me, self.config.discount))
         if (self.cbba.path[0] if self.cbba.path else None) != serving:
             self.changes += 1
@@ -152,6 +151,11 @@ class AssignmentExchange:
         rows, cols = linear_sum_assignment(cost)
         return {ours[c]: (entries[r][3], entries[r][4]) for r, c in zip(rows, cols, strict=True)
                 if cost[r, c] <= self.config.match_radius}
+
+    @property
+    def home(self) -> bool:
+        """Going home or refuelling there (never without a health model)."""
+        return self.sortie is not None and self.sortie.state in ("home", "refuelling")
 
     def view(self) -> AssignmentView:
         task = self.tasks.get(self.cbba.path[0]) if self.cbba.path else None

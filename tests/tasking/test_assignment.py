@@ -12,7 +12,7 @@ from agent.net import wire
 from agent.plugins import Views
 from agent.vehicles import vehicle_from_config
 from fusion.resync import Edge
-from tasking.assignment import AssignmentConfig, AssignmentPlanner, cell_area, fleet_tasks, search_cells
+from tasking.assignment import AssignmentConfig, AssignmentPlanner, cell_area, fleet_tasks, search_cells, search_tasks
 from tasking.base import AssignmentView, TrackView
 from tasking.registry import check_tasking
 from tasking.tasks import Task
@@ -59,7 +59,8 @@ def test_search_cells_tile_the_area():
 
 
 def test_tracks_come_before_search_cells():
-    tasks = fleet_tasks([(7, np.array([1.0, 2.0, 0.0]))], search_cells(AREA, 120.0), AssignmentConfig())
+    config = AssignmentConfig()
+    tasks = fleet_tasks([(7, np.array([1.0, 2.0, 0.0]))], search_tasks(search_cells(AREA, 120.0), config), config)
     assert tasks["track:7"].kind == "track" and tasks["track:7"].value == 10.0
     assert {t.kind for k, t in tasks.items() if k != "track:7"} == {"search"}
 
