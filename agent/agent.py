@@ -56,8 +56,9 @@ class Agent:
         self.sender = SendScheduler(scenario.sending, None if plan is None else plan.sender_budget(agent_id))
         self.topology = Topology(agent_id)
         self.exchanges: dict = {}
+        self.views = Views(self.exchanges)  # filled below; exchanges and planner read each other's views through it
         context = ExchangeContext(agent_id, scenario, self.terrain, seed, self.sender, self, self.unused,
-                                  self.topology, Views(self.exchanges), self.vehicle)
+                                  self.topology, self.views, self.vehicle)
         built = {kind: build(context) for kind, build in EXCHANGES.items()}
         self.exchanges.update((kind, exchange) for kind, exchange in built.items() if exchange is not None)
         self.extra_sensors = [s for exchange in self.exchanges.values() for s in exchange.sensors()]
@@ -106,7 +107,7 @@ class Agent:
         neighbours = self.topology.neighbours(t)
         for exchange in self.exchanges.values():
             self._offer(exchange, t, neighbours)
-        goal = self.planner.plan(state, Views(self.exchanges))
+        goal = self.planner.plan(state, self.views)
         self.vehicle.set_setpoint(goal_to_setpoint(goal))
         for sensor in self.sensors:
             sensor.point(goal.look_at)  # the gimbal command, for the next step's measurements

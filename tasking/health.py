@@ -38,14 +38,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fusion.validation import positive
 from tasking.tasks import operational_range
 
 __all__ = ["HealthModel", "VehicleHealth", "camera_quality"]
-
-
-def _positive(value: float, name: str) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive number, got {value}")
 
 
 def _non_negative(value: float, name: str) -> None:
@@ -71,8 +67,8 @@ class HealthModel:
     camera_fail: float = 0.15
 
     def __post_init__(self):
-        _positive(self.capacity, "fuel capacity")
-        _positive(self.burn, "burn rate k_fuel")
+        positive("fuel capacity", self.capacity)
+        positive("burn rate k_fuel", self.burn)
         if not (math.isfinite(self.burn_failed) and self.burn_failed > self.burn):
             raise ValueError(f"failure burn rate k_fuel,failure must exceed k_fuel = {self.burn}, "
                              f"got {self.burn_failed}")
