@@ -293,12 +293,16 @@ def test_lockstep_is_deterministic(mc_dir, tmp_path):
 # 4. Lockstep vs live
 
 LIVE_DURATION = 30.0
-# Tolerances, from the seed-to-seed spread of this scenario in lockstep (seeds 1-6: fleet RMSE 1.99-2.22 m,
-# relative std 4 %; ANEES 0.30-0.36, relative std 6 %; bytes/agent/s 12.9-13.6 k, 2 %). Live and lockstep
-# runs of one seed are two different realizations (message timing differs, so the UAVs fly differently and
-# the detections differ), whose difference has sqrt(2) times that spread; ~5 sigma of it, plus the first
-# seconds that a live agent can skip when its process starts late, gives these.
-RMSE_TOLERANCE = 0.30
+# Tolerances. Live and lockstep runs of one seed are two different realizations: message timing differs, so the
+# assignment planner's choices flip at different instants, the UAVs fly different paths and see the targets
+# from different geometry. The absolute fleet RMSE therefore follows the flight paths, not the estimator: six
+# live runs at 2x (default, 30 s, seed of the scenario, 2026-11-27) gave 1.11, 1.47, 1.11, 1.14, 1.11 and
+# 1.22 m against lockstep's 1.10 m — and the centralized oracle's own RMSE moved with them. What the runtime
+# must keep is the estimation quality on whatever geometry it flew: the fleet's RMSE over the oracle's on the
+# same measurements (lockstep 1.086; live 1.036-1.064, spread 3 %) and ANEES (0.547; live 0.526-0.582, 5 %).
+# ~4 sigma of that spread, plus the first seconds a late-starting live agent skips, gives these; the bytes
+# (12.9-13.6 k across seeds, 2 %) keep their earlier bound.
+RMSE_RATIO_TOLERANCE = 0.15
 ANEES_TOLERANCE = 0.40
 BYTES_TOLERANCE = 0.25
 
@@ -330,7 +334,8 @@ def test_lockstep_and_live_runs_agree(live_and_lockstep):
             assert all(t["rmse"] is not None for t in agent["targets"]), agent["id"]
     step = scenario.agent.step
     figures = {
-        "rmse": (lock["fleet"]["rmse"], live["fleet"]["rmse"], RMSE_TOLERANCE),
+        "rmse / oracle": (lock["fleet"]["rmse_ratio_to_oracle"], live["fleet"]["rmse_ratio_to_oracle"],
+                          RMSE_RATIO_TOLERANCE),
         "anees": (lock["fleet"]["anees"], live["fleet"]["anees"], ANEES_TOLERANCE),
         "bytes/agent/s": (
             np.mean([bytes_per_second_run(a, step) for a in lock["agents"]]),
