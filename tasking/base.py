@@ -12,7 +12,7 @@ caught when the planner is built (:mod:`tasking.registry`).
 from __future__ import annotations
 
 from collections.abc import Hashable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -30,9 +30,11 @@ class VehicleStateLike(Protocol):
 
 @dataclass(frozen=True)
 class TrackView:
-    """The agent's confirmed, fused tracks: ``(track id, NED mean position)`` pairs."""
+    """The agent's confirmed, fused tracks: ``(track id, NED mean position)`` pairs, and the tracks' horizontal
+    mean velocities (north, east) by id (absent for a model without velocity)."""
 
     positions: Sequence[tuple[Hashable, np.ndarray]]
+    velocities: Mapping[Hashable, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -49,12 +51,14 @@ class MapView:
 class AssignmentView:
     """This vehicle's share of the fleet's agreed assignment (:mod:`agent.beliefs.assignment`): the task it
     serves now (``None``: nothing won), whether it must go home (every task is out of its reach), where its
-    base is, and its peers' last reported (north, east) positions."""
+    base is, its peers' last reported (north, east) positions, and among them the ``partners`` that won
+    another slot of the same target (a shared orbit, :mod:`tasking.assignment`)."""
 
     task: Task | None
     home: bool
     base: np.ndarray
     peers: Mapping[str, np.ndarray]
+    partners: Mapping[str, np.ndarray] = field(default_factory=dict)
 
 
 class Planner(Protocol):

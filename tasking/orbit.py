@@ -31,7 +31,9 @@ class Goal:
     ``position`` (3,) NED is the point to fly to. If ``orbit_center`` (north, east) is given the goal
     is to circle it at ``orbit_radius`` in ``orbit_direction`` (+1 clockwise from above, -1
     anticlockwise), at the depth ``position[2]``; ``position[:2]`` is then the centre. ``speed`` is an
-    optional speed limit in m/s (``None``: the vehicle's own cruise/max speed). ``look_at`` (3,) NED is an
+    optional speed limit in m/s (``None``: the vehicle's own cruise/max speed). ``velocity`` (2,) (north, east)
+    [m/s] is an optional feed-forward: the velocity of the point or of the orbit's centre, which the vehicle adds
+    to its own guidance (a moving circle is then flown in the centre's frame). ``look_at`` (3,) NED is an
     optional gimbal command, "point the camera here" (``None``: the sensors keep their own pointing; spec 003
     §2.9: the GNC computer sends the gimbal its reference).
     """
@@ -42,6 +44,7 @@ class Goal:
     orbit_direction: int = 1
     speed: float | None = None
     look_at: np.ndarray | None = None
+    velocity: np.ndarray | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "position", as_vector(self.position, "goal position", 3))
@@ -60,6 +63,8 @@ class Goal:
             raise ValueError(f"speed must be a positive number of m/s or None, got {self.speed}")
         if self.look_at is not None:
             object.__setattr__(self, "look_at", as_vector(self.look_at, "goal look_at (NED)", 3))
+        if self.velocity is not None:
+            object.__setattr__(self, "velocity", as_vector(self.velocity, "goal velocity (north, east)", 2))
 
     @property
     def is_orbit(self) -> bool:
@@ -72,8 +77,10 @@ def goto_goal(position_ne, altitude: float, speed: float | None = None) -> Goal:
     return Goal(position=np.array([ne[0], ne[1], -float(altitude)]), speed=speed)
 
 
-def orbit_setpoint(center_ne, radius: float, altitude: float, direction: int = 1, speed: float | None = None) -> Goal:
-    """Circle ``center_ne`` (north, east) at ``radius`` and ``altitude`` (positive up) in ``direction``."""
+def orbit_setpoint(center_ne, radius: float, altitude: float, direction: int = 1, speed: float | None = None,
+                   velocity=None) -> Goal:
+    """Circle ``center_ne`` (north, east) at ``radius`` and ``altitude`` (positive up) in ``direction``, the centre
+    moving at ``velocity`` (north, east) if given."""
     center = as_vector(center_ne, "center_ne", 2)
     return Goal(
         position=np.array([center[0], center[1], -float(altitude)]),
@@ -81,6 +88,7 @@ def orbit_setpoint(center_ne, radius: float, altitude: float, direction: int = 1
         orbit_radius=radius,
         orbit_direction=direction,
         speed=speed,
+        velocity=velocity,
     )
 
 

@@ -177,7 +177,9 @@ class TrackExchange:
 
     # -- views and results ------------------------------------------------------------------------
     def view(self) -> TrackView:
-        return TrackView([(tid, est.mean[:2]) for tid, est in self.tracker.estimates()])
+        estimates = self.tracker.estimates()
+        return TrackView([(tid, est.mean[:2]) for tid, est in estimates],
+                         {tid: est.mean[3:5] for tid, est in estimates if len(est.mean) >= 6})
 
     def telemetry(self) -> dict:
         out = {

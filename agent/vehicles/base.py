@@ -60,12 +60,15 @@ class Setpoint:
 
     ``position`` (3,) NED: the point to fly to. ``speed``: optional speed limit (m/s). ``orbit``:
     optional ``(center (north, east), radius, direction)`` meaning "circle this point" at the depth
-    ``position[2]``; the horizontal part of ``position`` is then ignored.
+    ``position[2]``; the horizontal part of ``position`` is then ignored. ``velocity``: optional horizontal
+    feed-forward (north, east) [m/s], the velocity of the point (or of the orbit's centre) — MAVLink's
+    SET_POSITION_TARGET_LOCAL_NED carries the same pair.
     """
 
     position: np.ndarray
     speed: float | None = None
     orbit: tuple[np.ndarray, float, int] | None = None
+    velocity: np.ndarray | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "position", as_vector(self.position, "setpoint position", 3))
@@ -82,6 +85,8 @@ class Setpoint:
             if direction not in (1, -1):
                 raise ValueError(f"orbit direction must be +1 or -1, got {direction}")
             object.__setattr__(self, "orbit", (center, float(radius), int(direction)))
+        if self.velocity is not None:
+            object.__setattr__(self, "velocity", as_vector(self.velocity, "setpoint velocity", 2))
 
 
 @runtime_checkable
@@ -100,7 +105,7 @@ def goal_to_setpoint(goal: Goal) -> Setpoint:
     orbit = None
     if goal.orbit_center is not None:
         orbit = (goal.orbit_center, goal.orbit_radius, goal.orbit_direction)
-    return Setpoint(position=goal.position, speed=goal.speed, orbit=orbit)
+    return Setpoint(position=goal.position, speed=goal.speed, orbit=orbit, velocity=goal.velocity)
 
 
 def orbit_vector_field(rel_ne: np.ndarray, radius: float, direction: int, speed: float) -> np.ndarray:

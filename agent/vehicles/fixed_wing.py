@@ -55,7 +55,8 @@ class FixedWingModel(KinematicModel):
     arrived, loiters around it (clockwise) at ``loiter_radius = loiter_margin * min_turn_radius`` with
     the same vector field; the margin (chosen here) leaves bank authority to correct. A waypoint
     inside the turning circle may be missed by up to about ``min_turn_radius``, so a waypoint follower
-    should accept at least that distance. The setpoint speed limit is ignored (constant airspeed).
+    should accept at least that distance. The setpoint speed limit and velocity feed-forward are ignored
+    (constant airspeed: the aircraft cannot add a centre's velocity to its own).
     """
 
     def __init__(

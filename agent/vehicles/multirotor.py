@@ -51,6 +51,10 @@ class MultirotorModel(KinematicModel):
     ``min(limit, sqrt(0.8 a_max r))`` (so that the centripetal acceleration ``v^2/r`` fits in the
     acceleration limit), the vertical command the same braking profile on the depth error.
 
+    Velocity feed-forward (``Setpoint.velocity``, the point's or the centre's velocity ``v_ff``): the horizontal
+    command is ``v_ff`` plus the command above (the guidance then acts in the frame moving with the point or
+    the centre), scaled down so that the whole stays within ``max_speed``.
+
     The velocity follows the command as fast as ``max_accel`` allows (per sub-step the velocity
     change is clipped to ``a_max h``). Since the command lies in the convex set ``|v| <= v_max,
     |v_z| <= max_climb`` and the velocity moves on a straight segment towards it, the limits are never
@@ -111,13 +115,25 @@ class MultirotorModel(KinematicModel):
             command = error * (_approach_speed(distance, limit, self.position_gain, decel) / distance)
             if abs(command[2]) > self.max_climb:
                 command *= self.max_climb / abs(command[2])
-            return command
+            return self._feed_forward(command)
         center, radius, direction = sp.orbit
         dz = float(sp.position[2] - self._p[2])
         vz = math.copysign(_approach_speed(abs(dz), min(self.max_climb, limit), self.position_gain, decel), dz)
         cruise = min(limit, math.sqrt(0.8 * self.max_accel * radius), math.sqrt(max(limit**2 - vz**2, 0.0)))
         horizontal = orbit_vector_field(self._p[:2] - center, radius, direction, cruise)
-        return np.array([horizontal[0], horizontal[1], vz])
+        return self._feed_forward(np.array([horizontal[0], horizontal[1], vz]))
+
+    def _feed_forward(self, command: np.ndarray) -> np.ndarray:
+        """``command`` plus the setpoint's horizontal feed-forward, the horizontal part scaled so that the whole
+        stays within ``max_speed``."""
+        velocity = self._setpoint.velocity
+        if velocity is None:
+            return command
+        horizontal = command[:2] + velocity
+        speed, room = math.hypot(horizontal[0], horizontal[1]), math.sqrt(max(self.max_speed**2 - command[2]**2, 0.0))
+        if speed > room:
+            horizontal *= room / speed
+        return np.array([horizontal[0], horizontal[1], command[2]])
 
     def _substep(self, h: float) -> None:
         dv = self._velocity_command() - self._v

@@ -25,8 +25,9 @@ def setpoints(draw, min_radius: float = 1.0):
             draw(st.floats(min_radius, 200.0)),
             draw(st.sampled_from([1, -1])),
         )
+    velocity = draw(st.none() | st.tuples(st.floats(-30.0, 30.0), st.floats(-30.0, 30.0)))  # a feed-forward
     duration = draw(st.integers(1, 40))
-    return Setpoint(position, speed=speed, orbit=orbit), duration
+    return Setpoint(position, speed=speed, orbit=orbit, velocity=velocity), duration
 
 
 def fly(vehicle, plan, dt):

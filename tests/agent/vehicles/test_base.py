@@ -37,7 +37,9 @@ def test_goal_to_setpoint():
     center, radius, direction = setpoint.orbit
     np.testing.assert_allclose(center, [1.0, 2.0])
     assert (radius, direction) == (15.0, -1)
-    assert setpoint.speed is None
+    assert setpoint.speed is None and setpoint.velocity is None
+    setpoint = goal_to_setpoint(orbit_setpoint([1.0, 2.0], 15.0, 40.0, velocity=[3.0, -4.0]))
+    assert setpoint.velocity.tolist() == [3.0, -4.0]  # a moving centre's velocity reaches the vehicle
 
 
 @pytest.mark.parametrize(
@@ -50,6 +52,8 @@ def test_goal_to_setpoint():
         ({"position": [0.0, 0.0, 0.0], "orbit": ([0.0, 0.0], 10.0, 0)}, "direction"),
         ({"position": [0.0, 0.0, 0.0], "orbit": ([0.0, 0.0, 0.0], 10.0, 1)}, "orbit center"),
         ({"position": [0.0, 0.0, 0.0], "orbit": ([0.0, 0.0], 10.0)}, "orbit"),
+        ({"position": [0.0, 0.0, 0.0], "velocity": [1.0, float("inf")]}, "setpoint velocity"),  # infinite
+        ({"position": [0.0, 0.0, 0.0], "velocity": [1.0, 2.0, 3.0]}, "setpoint velocity"),  # three components
     ],
 )
 def test_setpoint_validation(kwargs, match):
