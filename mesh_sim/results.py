@@ -176,7 +176,21 @@ def summary_table(metrics: dict) -> Table:
     table.add_row("fleet", _fmt(f["rmse"], ".2f"), _fmt(f["anees"], ".2f"),
                   f"ratio {_fmt(f['rmse_ratio_to_oracle'], '.2f')}", _in_flight(f), _fmt(f.get("exact_share"), ".0%"),
                   _fmt(f["bytes_per_agent_per_s"], ",.0f"), "", "", "", style="bold")
+    table.caption = _orbit_caption(o.get("orbits"))
     return table
+
+
+def _orbit_caption(orbits: dict | None) -> str | None:
+    """A shared orbit's outcome (``mesh_sim.orbit_watch``) under the table, when the scenario has one."""
+    if orbits is None:
+        return None
+    radius = f"{orbits['radius_m']:g} m"
+    if orbits["rendezvous_s"] is None:
+        return f"shared orbit: the UAVs never were all on one target's {radius} circle"
+    steady = orbits["steady_spacing_error_deg"]
+    spacing = "" if steady is None else f"; spacing error {steady['median']:.0f}° (median, steady)"
+    return (f"shared orbit: all on the {radius} circle at {orbits['rendezvous_s']:.1f} s, "
+            f"{orbits['on_circle_share']:.0%} of the time after{spacing}")
 
 
 def _in_flight(fleet: dict) -> str:

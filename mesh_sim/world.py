@@ -26,6 +26,7 @@ from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps,
 from mesh_sim.fire import FireWorld
 from mesh_sim.grid_oracle import GridOracle, grid_extent
 from mesh_sim.oracle import InFlightOracle, Oracle
+from mesh_sim.orbit_watch import OrbitWatch
 from mesh_sim.scenario import load
 from mesh_sim.target_set import truth_snapshot
 from perception.terrain import terrain_from_config
@@ -51,6 +52,9 @@ class World:
         self.uavs: dict[str, list] = {}  # agent -> last reported position (the radio's range check uses it)
         self.closest: tuple[float, int, int] = (math.inf, 0, 0)  # (closest pair distance, violations, samples)
         self.separation_limit = float(scenario.agent.tasking.get("min_separation", REPORTED_SEPARATION))
+        tasking = scenario.agent.tasking
+        radius = float(tasking.get("orbit_radius", AssignmentConfig.orbit_radius))
+        self.orbits = OrbitWatch(radius, scenario.agent.agents) if tasking.get("orbit_slots", 1) > 1 else None
         self.now = 0.0
         sc = scenario.agent
         terrain = terrain_from_config(sc.terrain)
@@ -66,6 +70,8 @@ class World:
         self.seq += 1
         self._note_separation()
         payload = {"targets": truth_snapshot(self.scenario.targets, t), "uavs": dict(self.uavs)}
+        if self.orbits is not None:
+            self.orbits.observe(t, self.uavs, payload["targets"])
         if self.fire is not None:
             payload["fire"] = self.fire.payload(t)
             payload["decoys"] = [list(d) for d in self.scenario.decoys]
@@ -132,6 +138,8 @@ class World:
         if samples:
             out["separation"] = {"closest_m": closest, "violations": violations, "samples": samples,
                                  "below_m": self.separation_limit}
+        if self.orbits is not None:
+            out["orbits"] = self.orbits.summary()
         if self.oracle.imm is not None:
             out["imm_targets"] = self.oracle.imm_evaluator.summary()
         if self.in_flight is not None:

@@ -14,6 +14,15 @@ task, a peer closer than the separation layer's reach turns the goal into a poin
 velocity (:class:`tasking.separation.SeparationLayer`, thesis 000 §2.9), so that no two vehicles come
 closer than ``min_separation``.
 
+**Shared orbits** (``orbit_slots`` = k > 1; spec 004 §2.8-2.9): every track is k tasks, its *slots*
+``track:<id>`` and ``track:<id>#1`` ... ``#k-1``, of values ``track_value / (s + 1)`` for slot s (each further
+vehicle on a target adds less: CBBA fills every target's first slot before any second one, while every slot
+still outbids a search cell when ``track_value / k > search_value``). The vehicles that won slots of one target
+share its circle and space themselves equally on it with 004's rotation law (:mod:`tasking.circle_spacing`:
+``θ̇_i = ω_0 + k_θ (g⁺ - g⁻)/2`` about the fused estimate, the peers' phases from their reported positions);
+this is 004's rendezvous in the fleet: a vehicle that sees the target starts its own orbit, one told of it
+by a peer's track flies to the circle (case 1), and the fused track is the consensus on the centre.
+
 **Health** (``flight_time`` > 0; thesis 000 §2.7.4-2.7.5, :mod:`tasking.sortie`): fuel burns while flying,
 failures arrive as a Poisson process (``failure_rate``) and multiply the burn (``failure_burn``); a
 vehicle bids only for petals it can fly and still come home from, goes home when its fuel (at the current
@@ -32,7 +41,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from tasking.base import AssignmentView, VehicleStateLike
+from tasking.base import AssignmentView, TrackView, VehicleStateLike
+from tasking.circle_spacing import circle_gaps, spacing_rate, spacing_setpoint
 from tasking.health import HealthModel
 from tasking.orbit import Goal, goto_goal, orbit_setpoint
 from tasking.search import Area, WaypointFollower, check_area, lawnmower_waypoints
@@ -40,6 +50,7 @@ from tasking.separation import SeparationLayer
 from tasking.tasks import Task
 
 SEPARATION_LOOKAHEAD = 1.0  # s: a separated velocity becomes a goal this far ahead
+SLOT = "#"  # separates a track task's key from its slot number (slot 0 has none)
 OPTIONAL = frozenset({"min_separation", "flight_time", "failure_rate", "refuel_time", "reserve"})  # 0: off / none
 
 @dataclass(frozen=True)
@@ -64,6 +75,7 @@ class AssignmentConfig:
     reserve: float = 10.0  # s of flight kept in hand on the way home
     landing_radius: float = 5.0  # m from the base at which a returning vehicle lands
     period: float = 1.0  # s between bid broadcasts when nothing changed
+    orbit_slots: int = 1  # vehicles that share one target's circle, equally spaced (spec 004 §2.8)
 
     def __post_init__(self):
         for f in fields(self):
@@ -73,8 +85,9 @@ class AssignmentConfig:
                 raise ValueError(f"tasking.{f.name} must be a positive number, got {value!r}")
         if not 0 < self.discount <= 1:
             raise ValueError(f"tasking.discount (λ) must be in (0, 1], got {self.discount}")
-        if int(self.capacity) != self.capacity:
-            raise ValueError(f"tasking.capacity must be an integer, got {self.capacity}")
+        for name in ("capacity", "orbit_slots"):
+            if int(getattr(self, name)) != getattr(self, name):
+                raise ValueError(f"tasking.{name} must be an integer, got {getattr(self, name)}")
         if self.stickiness < 1:
             raise ValueError(f"tasking.stickiness must be ≥ 1, got {self.stickiness}")
         if self.failure_burn <= 1:
@@ -124,12 +137,20 @@ def search_tasks(cells: Mapping[str, np.ndarray], config: AssignmentConfig) -> d
 
 def fleet_tasks(tracks: Sequence[tuple[Hashable, np.ndarray]], searches: Mapping[Hashable, Task],
                 config: AssignmentConfig) -> dict[Hashable, Task]:
-    """The task set: the ``searches`` (:func:`search_tasks`) and one ``track:<id>`` task per confirmed track."""
+    """The task set: the ``searches`` (:func:`search_tasks`) and ``orbit_slots`` tasks per confirmed track,
+    ``track:<id>`` and ``track:<id>#s`` of value ``track_value / (s + 1)`` (module docstring)."""
     tasks = dict(searches)
     for track_id, position in tracks:
-        key = f"track:{track_id}"
-        tasks[key] = Task(key, np.asarray(position, float)[:2], config.track_value, "track")
+        for slot in range(config.orbit_slots):
+            key = f"track:{track_id}" + (f"{SLOT}{slot}" if slot else "")
+            tasks[key] = Task(key, np.asarray(position, float)[:2], config.track_value / (slot + 1), "track")
     return tasks
+
+
+def slot_of(key: str) -> tuple[str, int]:
+    """``("track:<id>", s)`` of a track task's key ``track:<id>#s`` (slot 0: the key itself)."""
+    target, _, slot = key.partition(SLOT)
+    return target, int(slot) if slot else 0
 
 
 class AssignmentPlanner:
@@ -140,15 +161,15 @@ class AssignmentPlanner:
     def __init__(self, config: AssignmentConfig, area: Area, altitude: float, step: float = 0.2,
                  max_speed: float | None = None):
         self.config, self.area, self.altitude, self.step = config, check_area(area), float(altitude), float(step)
-        speed = max_speed if max_speed is not None else config.cruise_speed
-        self.layer = SeparationLayer(config.min_separation, speed) if config.min_separation > 0 else None
+        self.layer_speed = max_speed if max_speed is not None else config.cruise_speed
+        self.layer = SeparationLayer(config.min_separation, self.layer_speed) if config.min_separation > 0 else None
         self._sweeps: dict[str, WaypointFollower] = {}
         self._hold: np.ndarray | None = None
         self.mode = "idle"
 
     def plan(self, state: VehicleStateLike, views: Mapping[str, object]) -> Goal:
         view: AssignmentView = views["tasks"]
-        goal = self._serve(state, view)
+        goal = self._serve(state, view, views.get("track"))
         return goal if self.layer is None else self._separated(state, view, goal)
 
     def _separated(self, state: VehicleStateLike, view: AssignmentView, goal: Goal) -> Goal:
@@ -164,7 +185,7 @@ class AssignmentPlanner:
         speed = float(np.hypot(*velocity))
         return goto_goal(own + velocity * SEPARATION_LOOKAHEAD, self.altitude, speed if speed > 0.1 else None)
 
-    def _serve(self, state: VehicleStateLike, view: AssignmentView) -> Goal:
+    def _serve(self, state: VehicleStateLike, view: AssignmentView, tracks: TrackView | None) -> Goal:
         position = np.asarray(state.position, float)
         task = view.task
         if view.home:
@@ -179,7 +200,28 @@ class AssignmentPlanner:
         self.mode = task.kind
         if task.kind == "search":
             return goto_goal(self._sweep(task.key).current(position)[:2], self.altitude)
+        if view.partners:
+            return self._spaced(position[:2], task, view.partners, tracks)
         return orbit_setpoint(task.position, self.config.orbit_radius, self.altitude)
+
+    def _spaced(self, own: np.ndarray, task: Task, partners: Mapping[str, np.ndarray],
+                tracks: TrackView | None) -> Goal:
+        """004's set-point on the shared circle about the task's target (``circle_spacing.spacing_setpoint``):
+        the point of the circle at this vehicle's phase ``θ_i`` with the feed-forward velocity ``ṗ̂ + r θ̇_i t̂`` —
+        the target's fused velocity (004 §2.8's translation) plus the rotation at the rate of the spacing law
+        between this vehicle's circle-neighbours among ``partners``. Flown clockwise, the sense in which the
+        phase grows; the vehicle's position loop pulls it onto the circle, the feed-forward carries it along."""
+        track_id = slot_of(task.key)[0].removeprefix("track:")
+        velocities = {} if tracks is None else {str(tid): v for tid, v in tracks.velocities.items()}
+        centre_velocity = np.asarray(velocities.get(track_id, np.zeros(2)), float)
+        positions = np.vstack([own, *partners.values()])
+        theta, ahead, behind = circle_gaps(np.broadcast_to(task.position, positions.shape), positions,
+                                           np.ones((len(positions),) * 2, bool))
+        radius = self.config.orbit_radius
+        rate = spacing_rate(ahead[:1], behind[:1], radius, self.step, float(np.hypot(*centre_velocity)),
+                            max_speed=self.layer_speed)
+        point = spacing_setpoint(task.position, centre_velocity, theta[:1], rate, radius, self.layer_speed)
+        return Goal(position=np.array([*point.position[0], -self.altitude]), velocity=point.velocity[0])
 
     def _sweep(self, key: str) -> WaypointFollower:
         """The boustrophedon of one cell, kept so that a vehicle sent back to a cell resumes its sweep."""

@@ -75,7 +75,7 @@ PLANNERS: dict[str, PlannerEntry] = {
         "search": str, "spacing": _NUMBER, "orbit_radius": _NUMBER, "acceptance_radius": _NUMBER,
         "orbit_direction": int, "speed": _NUMBER}),
     "assignment": PlannerEntry(_assignment, "tasks", {
-        f.name: (int if f.name == "capacity" else _NUMBER) for f in fields(AssignmentConfig)},
+        f.name: (int if f.name in ("capacity", "orbit_slots") else _NUMBER) for f in fields(AssignmentConfig)},
         AssignmentConfig.from_options),
     "entropy": PlannerEntry(_entropy, "grid", {
         f.name: (int if f.name == "horizon" else _NUMBER) for f in fields(EntropyPlannerConfig)

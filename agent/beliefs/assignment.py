@@ -34,7 +34,7 @@ from agent.net import wire
 from agent.plugins import Outgoing, Views
 from agent.sensors.truth import TruthSnapshot
 from fusion.resync import Edge
-from tasking.assignment import AssignmentConfig, fleet_tasks, search_cells, search_tasks
+from tasking.assignment import SLOT, AssignmentConfig, fleet_tasks, search_cells, search_tasks, slot_of
 from tasking.base import AssignmentView
 from tasking.cbba import CBBA, Bids, path_score
 from tasking.health import VehicleHealth
@@ -97,7 +97,7 @@ class AssignmentExchange:
 
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
         bids = self.cbba.message(t)
-        entries = [[key if not key.startswith(TRACK) else TRACK, *map(float, self.tasks[key].position), winner, bid]
+        entries = [[_wire_key(key), *map(float, self.tasks[key].position), winner, bid]
                    for key, (winner, bid) in sorted(bids.winners.items()) if key in self.tasks]
         digest = tuple((e[0], round(e[1]), round(e[2]), e[3], round(e[4], 3)) for e in entries)
         if digest == self._sent and t - self._sent_at < self.config.period and not self._crowded():
@@ -130,27 +130,34 @@ class AssignmentExchange:
         numbers = [*at, *stamps.values(), *(x for e in entries for x in (e[1], e[2], e[4]))]
         if not all(math.isfinite(x) for x in numbers):
             raise wire.DecodeError("non_finite", "NaN or inf in a tasks message")
-        unknown = [e[0] for e in entries if e[0] != TRACK and e[0] not in self.cells]
+        slots = {TRACK, *(f"{TRACK}{SLOT}{s}" for s in range(1, self.config.orbit_slots))}
+        unknown = [e[0] for e in entries if e[0] not in slots and e[0] not in self.cells]
         if unknown:
             raise wire.DecodeError("bad_field", f"unknown task keys {unknown[:3]}")
-        winners = {e[0]: (e[3], e[4]) for e in entries if e[0] != TRACK}
-        winners.update(self._match_tracks([e for e in entries if e[0] == TRACK]))
+        winners = {e[0]: (e[3], e[4]) for e in entries if e[0] not in slots}
+        winners.update(self._match_tracks([e for e in entries if e[0] in slots]))
         self.peers[origin] = np.array(at, float)
         self.merges += 1
         self.cbba.merge(origin, Bids(winners, stamps), t)
         return []  # bids are no belief: nothing to count among the fusions
 
     def _match_tracks(self, entries: list) -> dict[str, tuple[str, float]]:
-        """A peer's track tasks under this agent's keys: one-to-one nearest within ``match_radius``."""
-        ours = [key for key, task in self.tasks.items() if task.kind == TRACK]
+        """A peer's track tasks under this agent's keys: its targets (the distinct positions of its entries)
+        matched one-to-one to ours, nearest within ``match_radius``; each slot keeps its number."""
+        ours = [key for key, task in self.tasks.items() if task.kind == TRACK and slot_of(key)[1] == 0]
         if not ours or not entries:
             return {}
-        theirs = np.array([[e[1], e[2]] for e in entries])
-        mine = np.array([self.tasks[key].position for key in ours])
+        where = sorted({(e[1], e[2]) for e in entries})
+        theirs, mine = np.array(where), np.array([self.tasks[key].position for key in ours])
         cost = np.hypot(*(theirs[:, None, :] - mine[None, :, :]).transpose(2, 0, 1))
         rows, cols = linear_sum_assignment(cost)
-        return {ours[c]: (entries[r][3], entries[r][4]) for r, c in zip(rows, cols, strict=True)
-                if cost[r, c] <= self.config.match_radius}
+        target = {where[r]: ours[c] for r, c in zip(rows, cols, strict=True) if cost[r, c] <= self.config.match_radius}
+        matched = {}
+        for key, north, east, winner, bid in entries:
+            if (north, east) in target:
+                slot = key.partition(SLOT)[2]
+                matched[target[north, east] + (SLOT + slot if slot else "")] = (winner, bid)
+        return matched
 
     @property
     def home(self) -> bool:
@@ -159,7 +166,13 @@ class AssignmentExchange:
 
     def view(self) -> AssignmentView:
         task = self.tasks.get(self.cbba.path[0]) if self.cbba.path else None
-        return AssignmentView(task, self.home, self.base, dict(self.peers))
+        partners = {}
+        if task is not None and task.kind == TRACK:
+            target = slot_of(task.key)[0]
+            partners = {winner: self.peers[winner] for key, winner in self.cbba.winners.items()
+                        if winner != self.me and winner in self.peers and key.startswith(TRACK)
+                        and slot_of(key)[0] == target}
+        return AssignmentView(task, self.home, self.base, dict(self.peers), partners)
 
     def telemetry(self) -> dict:
         task = self.view().task
@@ -193,6 +206,15 @@ class AssignmentExchange:
                                "serving": dict(kinds),
                                "timeline": [[t, served] for t, served in self.timeline],
                                "evaluated_until": self.evaluated_until}}
+
+
+def _wire_key(key: str) -> str:
+    """A task's key on the wire: track ids are local, so a track task travels as ``track`` (slot 0) or
+    ``track#s`` with its position, and the receiver matches it to its own track (:meth:`_match_tracks`)."""
+    if not key.startswith(TRACK):
+        return key
+    slot = slot_of(key)[1]
+    return TRACK + (f"{SLOT}{slot}" if slot else "")
 
 
 def agreement(timelines: dict[str, list], end: float, window: float) -> dict:

@@ -105,9 +105,8 @@ BENCHMARKS: dict[str, Benchmark] = {
         Benchmark(
             "tasking",
             "mesh_sim.bench.tasking",
-            "issue 13's tasking benchmarks in one run: tasking-fleet, tasking-health, tasking-orbit, tasking-paths, "
-            "tasking-feature "
-            "(and their goals)",
+            "issue 13's tasking benchmarks in one run: tasking-fleet, tasking-health, tasking-orbit, "
+            "tasking-rendezvous, tasking-paths, tasking-feature (and their goals)",
         ),
         Benchmark(
             "tasking-fleet",
@@ -126,6 +125,12 @@ BENCHMARKS: dict[str, Benchmark] = {
             "mesh_sim.bench.tasking_orbit",
             "coordinated orbits (Andreetto et al., spec 004): E1 RMSE and steady-state time vs n (static vs dynamic), "
             "E2 constant-velocity target, E3 rendezvous — beside the paper's figures",
+        ),
+        Benchmark(
+            "tasking-rendezvous",
+            "mesh_sim.bench.tasking_rendezvous",
+            "spec 004 in the running fleet, lockstep: the orbit and rendezvous scenarios with shared, equally spaced "
+            "orbits vs one orbiter (time to meet, share on the circle, spacing error, oracle RMSE)",
         ),
         Benchmark(
             "tasking-paths",

@@ -12,7 +12,7 @@ import importlib
 
 from mesh_sim.bench import common
 
-PARTS = ("tasking_fleet", "tasking_health", "tasking_orbit", "tasking_paths", "tasking_feature")
+PARTS = ("tasking_fleet", "tasking_health", "tasking_orbit", "tasking_rendezvous", "tasking_paths", "tasking_feature")
 
 
 def _part(module: str):
