@@ -105,10 +105,10 @@ class FlightController:
 
     @property
     def landed_state(self) -> int:
+        if self.armed and self._mode(PX4_MAIN_AUTO, PX4_AUTO_TAKEOFF):
+            return mavlink.MAV_LANDED_STATE_TAKEOFF
         if not self.airborne:
             return mavlink.MAV_LANDED_STATE_ON_GROUND
-        if self.sub_mode == PX4_AUTO_TAKEOFF and self.main_mode == PX4_MAIN_AUTO:
-            return mavlink.MAV_LANDED_STATE_TAKEOFF
         if self._target[2] >= -GROUND_TOLERANCE:
             return mavlink.MAV_LANDED_STATE_LANDING
         return mavlink.MAV_LANDED_STATE_IN_AIR

@@ -8,6 +8,8 @@ What a PX4 ``mavlink_receiver`` does with the messages simulated here:
 * PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET -> PARAM_VALUE (:mod:`~mesh_sim.autopilot.params`);
   PX4 answers a PARAM_SET of an unknown name with nothing, and a rejected value with the current value;
 * TIMESYNC with ``tc1 == 0`` (a request) -> TIMESYNC with ``tc1`` = our time in ns and ``ts1`` echoed;
+* PING with ``target_system == 0`` (a request; MAVSDK sends one a second) -> PING echoing ``time_usec`` and
+  ``seq``, addressed to the sender (PX4 ``handle_message_ping``);
 * GIMBAL_MANAGER_SET_PITCHYAW -> the gimbal (radians);
 * anything else (HEARTBEAT of a ground station, ...) is counted by type and otherwise ignored.
 
@@ -44,6 +46,7 @@ class MessageRouter:
             "PARAM_REQUEST_READ": self._param_read,
             "PARAM_SET": self._param_set,
             "TIMESYNC": self._timesync,
+            "PING": self._ping,
             "GIMBAL_MANAGER_SET_PITCHYAW": self._gimbal_pitchyaw,
         }
 
@@ -104,6 +107,11 @@ class MessageRouter:
         if msg.tc1 != 0:  # a reply to someone's request, not a request
             return []
         return [self.telemetry.encoder.timesync_encode(int(self.controller.t * 1e9), msg.ts1)]
+
+    def _ping(self, msg, streams):
+        if msg.target_system != 0:  # a reply, not a request
+            return []
+        return [self.telemetry.encoder.ping_encode(msg.time_usec, msg.seq, msg.get_srcSystem(), msg.get_srcComponent())]
 
     def _gimbal_pitchyaw(self, msg, streams):
         self.controller.gimbal.point(msg.pitch, msg.yaw)

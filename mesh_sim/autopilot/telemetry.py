@@ -24,8 +24,9 @@ from perception.rotations import quaternion_from_euler
 
 PX4_VERSION = (1, 14, 0)  # the PX4 release whose behaviour is reproduced (AUTOPILOT_VERSION.flight_sw_version)
 SENSORS = (  # SYS_STATUS: present, enabled and healthy
-    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
-    | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE | mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
     | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY | mavlink.MAV_SYS_STATUS_AHRS
 )
 CAPABILITIES = (  # AUTOPILOT_VERSION.capabilities: what this simulator implements
@@ -100,7 +101,9 @@ class Telemetry:
         if not self.controller.position_valid:
             return None
         s = self.controller.model.state()
-        return self.encoder.local_position_ned_encode(self.time_boot_ms, *map(float, s.position), *map(float, s.velocity))
+        x, y, z = map(float, s.position)
+        vx, vy, vz = map(float, s.velocity)
+        return self.encoder.local_position_ned_encode(self.time_boot_ms, x, y, z, vx, vy, vz)
 
     def attitude(self):
         s = self.controller.model.state()
