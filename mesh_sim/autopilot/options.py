@@ -13,7 +13,6 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent.config import AgentScenario
 from agent.vehicles.mavlink_protocol import (
     PX4_GCS_PORT,
     PX4_LOCAL_GCS_PORT,
@@ -21,7 +20,9 @@ from agent.vehicles.mavlink_protocol import (
     PX4_OFFBOARD_PORT,
 )
 
-DEFAULT_ORIGIN = AgentScenario.origin  # skymesh's default scenario origin (lat, lon [deg], alt [m])
+#: skymesh's default scenario origin (lat, lon [deg], alt [m]), ``agent.config.AgentScenario.origin`` (a test keeps
+#: them equal; importing agent.config here would cost the simulator two seconds of start-up)
+DEFAULT_ORIGIN = (43.5605, 1.4664, 150.0)
 
 
 @dataclass(frozen=True)
@@ -80,8 +81,8 @@ def _origin(text: str) -> tuple[float, float, float]:
 
 def _port(text: str) -> int:
     value = int(text)
-    if not 1 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"a UDP port is 1..65535, got {text}")
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"a UDP port is 0..65535 (0: any free port), got {text}")
     return value
 
 
