@@ -11,6 +11,7 @@ What a PX4 ``mavlink_receiver`` does with the messages simulated here:
 * PING with ``target_system == 0`` (a request; MAVSDK sends one a second) -> PING echoing ``time_usec`` and
   ``seq``, addressed to the sender (PX4 ``handle_message_ping``);
 * GIMBAL_MANAGER_SET_PITCHYAW -> the gimbal (radians);
+* FILE_TRANSFER_PROTOCOL -> a NAK (:mod:`~mesh_sim.autopilot.ftp`: no file system here);
 * anything else (HEARTBEAT of a ground station, ...) is counted by type and otherwise ignored.
 
 A message whose ``target_system`` is neither 0 (broadcast) nor ours, or whose ``target_component`` is
@@ -20,6 +21,7 @@ neither 0 nor the autopilot's, is not for us: it is counted (``other_target``) a
 from __future__ import annotations
 
 from agent.vehicles.mavlink_protocol import mavlink
+from mesh_sim.autopilot import ftp
 from mesh_sim.autopilot.commands import Command, CommandHandler
 from mesh_sim.autopilot.counters import Counters
 from mesh_sim.autopilot.flight import FlightController
@@ -47,6 +49,7 @@ class MessageRouter:
             "PARAM_SET": self._param_set,
             "TIMESYNC": self._timesync,
             "PING": self._ping,
+            "FILE_TRANSFER_PROTOCOL": self._ftp,
             "GIMBAL_MANAGER_SET_PITCHYAW": self._gimbal_pitchyaw,
         }
 
@@ -112,6 +115,13 @@ class MessageRouter:
         if msg.target_system != 0:  # a reply, not a request
             return []
         return [self.telemetry.encoder.ping_encode(msg.time_usec, msg.seq, msg.get_srcSystem(), msg.get_srcComponent())]
+
+    def _ftp(self, msg, streams):
+        payload = ftp.nak(msg.payload)
+        if payload is None:
+            return []
+        return [self.telemetry.encoder.file_transfer_protocol_encode(0, msg.get_srcSystem(), msg.get_srcComponent(),
+                                                                     payload)]
 
     def _gimbal_pitchyaw(self, msg, streams):
         self.controller.gimbal.point(msg.pitch, msg.yaw)

@@ -4,6 +4,7 @@ streams, TIMESYNC, messages for another system."""
 from __future__ import annotations
 
 import math
+import struct
 
 import numpy as np
 import pytest
@@ -248,3 +249,27 @@ def test_delay_line_keeps_order_and_delay():
     assert line.pop_due(1.3) == ["a"] and line.pop_due(1.4) == ["b"] and len(line) == 0
     with pytest.raises(ValueError):
         DelayLine(-1.0)
+
+
+def test_ftp_requests_get_a_file_not_found_nak(sim):
+    router, streams, _ = sim
+    # an OpenFileRO (opcode 4) of "@PARAM/param.pck", sequence 7, session 0: what MAVProxy sends first
+    request = list(struct.pack("<HBBBBBBI", 7, 0, 4, 16, 0, 0, 0, 0) + b"@PARAM/param.pck")
+    (reply,) = router.handle(roundtrip(GCS.file_transfer_protocol_encode(0, SYSID, 1, request + [0] * 219)), streams)
+    seq, session, opcode, size, req_opcode = struct.unpack_from("<HBBBB", bytes(reply.payload))
+    assert (seq, opcode, size, req_opcode, reply.payload[12]) == (8, 129, 1, 4, 10)  # NAK, FileNotFound
+    assert (reply.target_system, reply.target_component) == (245, 190)
+    nak = list(bytes(reply.payload))
+    assert router.handle(roundtrip(GCS.file_transfer_protocol_encode(0, SYSID, 1, nak)), streams) == []
+
+
+def test_the_default_origin_is_the_default_scenario_origin_and_the_cli_takes_the_options():
+    from agent.config import AgentScenario
+    from mesh_sim.autopilot.options import DEFAULT_ORIGIN, options_from_args
+    from mesh_sim.cli import build_parser
+
+    assert DEFAULT_ORIGIN == AgentScenario.origin
+    options = options_from_args(build_parser().parse_args(["autopilot", "--instance", "3", "--latency-ms", "50"]))
+    assert options.system_id == 4 and options.latency_ms == 50.0
+    assert options.offboard_bind == ("127.0.0.1", 14583) and options.offboard_remote == ("127.0.0.1", 14543)
+    assert options.gcs_bind == ("127.0.0.1", 18573) and options.gcs_remote == ("127.0.0.1", 14550)
