@@ -254,8 +254,8 @@ def test_delay_line_keeps_order_and_delay():
 def test_ftp_requests_get_a_file_not_found_nak(sim):
     router, streams, _ = sim
     # an OpenFileRO (opcode 4) of "@PARAM/param.pck", sequence 7, session 0: what MAVProxy sends first
-    request = list(struct.pack("<HBBBBBBI", 7, 0, 4, 16, 0, 0, 0, 0) + b"@PARAM/param.pck")
-    (reply,) = router.handle(roundtrip(GCS.file_transfer_protocol_encode(0, SYSID, 1, (request + [0] * 251)[:251])), streams)
+    request = list((struct.pack("<HBBBBBBI", 7, 0, 4, 16, 0, 0, 0, 0) + b"@PARAM/param.pck").ljust(251, b"\0"))
+    (reply,) = router.handle(roundtrip(GCS.file_transfer_protocol_encode(0, SYSID, 1, request)), streams)
     seq, session, opcode, size, req_opcode = struct.unpack_from("<HBBBB", bytes(reply.payload))
     assert (seq, opcode, size, req_opcode, reply.payload[12]) == (8, 129, 1, 4, 10)  # NAK, FileNotFound
     assert (reply.target_system, reply.target_component) == (245, 190)
