@@ -14,7 +14,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -49,13 +48,15 @@ class AutopilotProcess:
         return self.popen.pid
 
     @classmethod
-    def start(cls, *args: str, timeout: float = 20.0) -> AutopilotProcess:
-        """Start a simulator with ``args`` (more options) on four free ports; wait for its ready line."""
+    def start(cls, *args: str, timeout: float = 20.0, quiet: bool = False) -> AutopilotProcess:
+        """Start a simulator with ``args`` (more options) on four free ports; wait for its ready line.
+        ``quiet`` discards its log (stderr), which is otherwise this process's stderr."""
         ports = free_udp_ports(4)
         command = [sys.executable, "-m", "mesh_sim.autopilot", "--offboard-port", str(ports[0]),
                    "--offboard-remote-port", str(ports[1]), "--gcs-port", str(ports[2]),
                    "--gcs-remote-port", str(ports[3]), "--parent-pid", str(os.getpid()), *args]
-        popen = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, text=True)
+        popen = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL if quiet else None,
+                                 text=True)
         process = cls(popen, *ports)
         try:
             process.ready = process._read_line(timeout)
@@ -102,13 +103,3 @@ class AutopilotProcess:
     def __exit__(self, *exc) -> None:
         self.stop()
 
-
-def wait_until(predicate, timeout: float, period: float = 0.05) -> bool:
-    """Poll ``predicate()`` until it is true or ``timeout`` seconds pass; its last value."""
-    deadline = time.monotonic() + timeout
-    while True:
-        if predicate():
-            return True
-        if time.monotonic() >= deadline:
-            return False
-        time.sleep(period)
