@@ -55,8 +55,8 @@ class AutopilotProcess:
         command = [sys.executable, "-m", "mesh_sim.autopilot", "--offboard-port", str(ports[0]),
                    "--offboard-remote-port", str(ports[1]), "--gcs-port", str(ports[2]),
                    "--gcs-remote-port", str(ports[3]), "--parent-pid", str(os.getpid()), *args]
-        popen = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL if quiet else None,
-                                 text=True)
+        stderr = subprocess.DEVNULL if quiet else None
+        popen = subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=stderr, text=True)
         process = cls(popen, *ports)
         try:
             process.ready = process._read_line(timeout)

@@ -155,8 +155,8 @@ def _trials(clients: list[Client], trials: int) -> tuple[list[float], list[float
     """Setpoint response times (s) of every simulator, and the LOCAL_POSITION_NED rate each achieved meanwhile."""
     responses, rates = [], []
     for client in clients:
-        result = client.command(clients, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
-                                1e6 / TRIAL_LPN_RATE)
+        result = client.command(clients, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                                mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 1e6 / TRIAL_LPN_RATE)
         if result != mavlink.MAV_RESULT_ACCEPTED:
             raise RuntimeError(f"SET_MESSAGE_INTERVAL refused: {result}")
     pump_all(clients, 0.3)
