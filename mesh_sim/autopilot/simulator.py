@@ -102,7 +102,7 @@ class Simulator:
                 for link in self.links:
                     link.read(now)
                     for msg in link.messages(now):
-                        for reply in self.router.handle(msg, link.streams):
+                        for reply in self._handle(msg, link):
                             link.send(reply, now)
                 if now >= next_physics:
                     self.controller.step(now)
@@ -121,6 +121,15 @@ class Simulator:
                     selector.select(timeout)
         finally:
             selector.close()
+
+    def _handle(self, msg, link: Link) -> list:
+        """The router's replies; a message that makes a handler fail is a defect to log and count, never a stop."""
+        try:
+            return self.router.handle(msg, link.streams)
+        except Exception:
+            log.exception("handling %s failed", msg.get_type())
+            self.counters.reject("handler_error")
+            return []
 
     def _send_statustexts(self, now: float) -> None:
         texts, self.controller.statustexts = self.controller.statustexts, []

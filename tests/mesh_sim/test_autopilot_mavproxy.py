@@ -1,9 +1,10 @@
 """MAVProxy (headless: ``--non-interactive``, no map, no console) as the ground station of the simulator: it
 detects the vehicle, decodes the PX4 mode, and downloads the parameters over the parameter protocol.
 
-MAVProxy runs in a temporary folder (it writes ``mav.tlog`` and ``mav_SYS_COMP.parm`` where it runs) and is stopped by
-PID. Its ``--cmd`` commands run before a vehicle is detected and it reads no stdin when non-interactive, so
-this test drives nothing; it checks what an unmodified MAVProxy makes of the simulator."""
+MAVProxy runs in a temporary folder (it writes ``mav.tlog`` and ``mav_SYS_COMP.parm`` where it runs),
+unbuffered (``python -u``, so that its lines arrive as it prints them), and is stopped by PID. Its ``--cmd``
+commands run before a vehicle is detected and it reads no stdin when non-interactive, so this test drives
+nothing; it checks what an unmodified MAVProxy makes of the simulator."""
 
 from __future__ import annotations
 
@@ -42,7 +43,7 @@ def read_until(popen: subprocess.Popen, wanted: list[str], timeout: float) -> st
 def test_mavproxy_detects_the_vehicle_its_px4_mode_and_its_parameters(tmp_path):
     with AutopilotProcess.start("--instance", "4") as ap:
         popen = subprocess.Popen(
-            [sys.executable, MAVPROXY, f"--master=udpin:127.0.0.1:{ap.gcs_remote_port}", "--non-interactive",
+            [sys.executable, "-u", MAVPROXY, f"--master=udpin:127.0.0.1:{ap.gcs_remote_port}", "--non-interactive",
              "--nowait"],
             cwd=tmp_path, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         try:

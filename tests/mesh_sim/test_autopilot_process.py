@@ -258,3 +258,34 @@ def test_the_simulator_exits_when_its_parent_is_gone():
             os.kill(child, signal.SIGKILL)
         except ProcessLookupError:
             pass
+
+
+def test_it_answers_whoever_last_sent_a_valid_message_and_garbage_teaches_nothing():
+    with AutopilotProcess.start() as ap:
+        # a client on a port of its own choosing (not the configured remote port) ...
+        client = mavutil.mavlink_connection(f"udpout:127.0.0.1:{ap.offboard_port}", source_system=245,
+                                            source_component=190)
+        stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        stranger.settimeout(0.5)
+        try:
+            client.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            assert client.recv_match(type="HEARTBEAT", blocking=True, timeout=3) is not None
+            # ... keeps getting the streams after garbage from another socket
+            stranger.sendto(b"\x00 garbage from a stranger", ("127.0.0.1", ap.offboard_port))
+            drain(client, 0.3)
+            assert client.recv_match(type="ATTITUDE", blocking=True, timeout=1) is not None
+            with pytest.raises(TimeoutError):
+                stranger.recvfrom(1024)
+        finally:
+            stranger.close()
+            client.close()
+
+
+def test_a_fixed_wing_says_so_in_its_heartbeat():
+    with AutopilotProcess.start("--vehicle", "fixed_wing") as ap:
+        gcs = connect(ap.gcs_remote_port)
+        try:
+            hb = gcs.wait_heartbeat(timeout=5)
+            assert hb.type == mavlink.MAV_TYPE_FIXED_WING and hb.autopilot == mavlink.MAV_AUTOPILOT_PX4
+        finally:
+            gcs.close()
