@@ -179,3 +179,18 @@ def test_the_battery_drains_only_while_armed():
     c.arm()
     run(c, 20.0)
     assert c.battery.remaining == pytest.approx(0.9, abs=1e-6)
+
+
+def test_a_velocity_setpoint_stream_flies_at_that_velocity():
+    c = controller()
+    airborne_at(c)
+
+    def velocity_target(t):
+        c.set_offboard_target(OffboardTarget(NAN3, np.array([2.0, -1.0, 0.0]), c.t, c.position))
+
+    velocity_target(c.t)
+    c.start_offboard()
+    start = c.position.copy()
+    run(c, c.t + 6.0, feed=velocity_target)
+    np.testing.assert_allclose(c.model.state().velocity, [2.0, -1.0, 0.0], atol=0.05)
+    assert c.position[2] == pytest.approx(start[2], abs=0.05)  # z was held

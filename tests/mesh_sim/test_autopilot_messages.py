@@ -273,3 +273,19 @@ def test_the_default_origin_is_the_default_scenario_origin_and_the_cli_takes_the
     assert options.system_id == 4 and options.latency_ms == 50.0
     assert options.offboard_bind == ("127.0.0.1", 14583) and options.offboard_remote == ("127.0.0.1", 14543)
     assert options.gcs_bind == ("127.0.0.1", 18573) and options.gcs_remote == ("127.0.0.1", 14550)
+
+
+def test_sys_status_and_battery_status_report_the_battery_and_whether_it_may_arm(sim):
+    router, _, _ = sim
+    telemetry, battery = router.telemetry, router.controller.battery
+    assert not telemetry.sys_status().onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK  # t = 0
+    step(router, 2.0)
+    status = telemetry.sys_status()
+    assert status.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    assert status.battery_remaining == 100 and status.voltage_battery == 16200  # 4 cells x 4.05 V
+    battery.remaining = 0.1  # below BAT_LOW_THR
+    status, pack = telemetry.sys_status(), telemetry.battery_status()
+    assert not status.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    assert status.battery_remaining == 10 and pack.battery_remaining == 10
+    assert pack.charge_state == mavlink.MAV_BATTERY_CHARGE_STATE_LOW
+    assert pack.voltages[:5] == [3645] * 4 + [65535]  # 3.6 V + 0.1 x 0.45 V per cell; no fifth cell

@@ -26,7 +26,7 @@ from agent.vehicles.mavlink_protocol import (
     px4_modes,
 )
 from mesh_sim.autopilot.options import DEFAULT_ORIGIN
-from mesh_sim.autopilot.process import REPO, AutopilotProcess
+from mesh_sim.autopilot.process import REPO, AutopilotProcess, free_udp_ports
 from tests.processes import assert_all_gone
 
 pytestmark = pytest.mark.slow
@@ -239,9 +239,11 @@ def test_sigterm_stops_cleanly_and_writes_the_stats_file(tmp_path):
 
 def test_the_simulator_exits_when_its_parent_is_gone():
     # a parent that starts a simulator watching it, prints the simulator's PID, then dies
+    offboard, gcs = free_udp_ports(2)
     parent_code = (
         "import subprocess, sys, os\n"
         "p = subprocess.Popen([sys.executable, '-m', 'mesh_sim.autopilot', '--offboard-port', '0', '--gcs-port', '0',"
+        f" '--offboard-remote-port', '{offboard}', '--gcs-remote-port', '{gcs}',"
         " '--parent-pid', str(os.getpid())], stdout=subprocess.DEVNULL)\n"
         "print(p.pid, flush=True)\n"
         "sys.stdin.readline()\n"
@@ -289,3 +291,14 @@ def test_a_fixed_wing_says_so_in_its_heartbeat():
             assert hb.type == mavlink.MAV_TYPE_FIXED_WING and hb.autopilot == mavlink.MAV_AUTOPILOT_PX4
         finally:
             gcs.close()
+
+
+def test_skymesh_autopilot_runs_for_its_duration_and_reports():
+    offboard, gcs = free_udp_ports(2)  # nothing is sent to the real 14540 / 14550 of this machine
+    done = subprocess.run([sys.executable, "-m", "mesh_sim", "autopilot", "--offboard-port", "0", "--gcs-port", "0",
+                           "--offboard-remote-port", str(offboard), "--gcs-remote-port", str(gcs), "--duration", "0.5"],
+                          cwd=REPO, capture_output=True, text=True, timeout=30)
+    assert done.returncode == 0, done.stderr
+    ready, stopped = (json.loads(line) for line in done.stdout.splitlines())
+    assert ready["event"] == "ready" and ready["sysid"] == 1 and ready["links"]["gcs"]["remote"][1] == gcs
+    assert stopped["event"] == "stopped" and stopped["counters"]["sent"] > 0
