@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.vehicles.base import KinematicModel, Setpoint
+from agent.vehicles.base import KinematicModel, Setpoint, wrap_angle
 from agent.vehicles.mavlink_protocol import (
     PX4_AUTO_LAND,
     PX4_AUTO_LOITER,
@@ -87,6 +87,7 @@ class FlightController:
         self._target = self.position.copy()  # the current mode's reference position
         self._rtl_phase = ""
         self._landed_at: float | None = None
+        self.angular_rates = (0.0, 0.0, 0.0)  # roll, pitch, yaw rates [rad/s] over the last step
         # NAV_ACC_RAD for a multirotor; a fixed wing arrives when it loiters around the point
         self.acceptance_radius = max(NAV_ACC_RAD, 1.1 * getattr(model, "loiter_radius", 0.0))
 
@@ -226,9 +227,15 @@ class FlightController:
         if self.armed and not self.airborne and setpoint.position[2] < -GROUND_TOLERANCE:
             self.airborne = True
         if self.airborne:
+            before = self.model.state()
             self.model.set_setpoint(setpoint)
             self.model.step(dt)
+            after = self.model.state()
+            self.angular_rates = tuple(wrap_angle(b - a) / dt for a, b in (
+                (before.roll, after.roll), (before.pitch, after.pitch), (before.yaw, after.yaw)))
             self._advance_mission()
+        else:
+            self.angular_rates = (0.0, 0.0, 0.0)
         self._auto_disarm()
         self.battery.drain(dt, self.armed)
         self.gimbal.step(dt)

@@ -5,7 +5,9 @@ Field conventions are those of the MAVLink common message set and of PX4's strea
 cm/s in GLOBAL_POSITION_INT (``alt`` above mean sea level, taken here as the WGS-84 height the scenario
 origin is given in, ``relative_alt`` above home); radians in ATTITUDE; ``time_boot_ms`` counted from the
 simulator's own boot. Geodetic coordinates come from :mod:`agent.vehicles.geodesy` (the one place that
-converts) relative to the scenario origin, which is also GPS_GLOBAL_ORIGIN. Messages about the position
+converts) relative to the scenario origin, which is also GPS_GLOBAL_ORIGIN. The angular rates of ATTITUDE
+are the Euler-angle rates over the last physics step (the body rates, to first order in roll and pitch): the
+kinematic models have no rate state. Messages about the position
 (LOCAL_POSITION_NED, GLOBAL_POSITION_INT, HOME_POSITION, GPS_GLOBAL_ORIGIN) are not published before the
 position estimate is valid, as PX4 publishes them only once EKF2 has a position.
 """
@@ -107,12 +109,12 @@ class Telemetry:
 
     def attitude(self):
         s = self.controller.model.state()
-        return self.encoder.attitude_encode(self.time_boot_ms, s.roll, s.pitch, s.yaw, 0.0, 0.0, 0.0)
+        return self.encoder.attitude_encode(self.time_boot_ms, s.roll, s.pitch, s.yaw, *self.controller.angular_rates)
 
     def attitude_quaternion(self):
         s = self.controller.model.state()
         w, x, y, z = _wxyz(s.roll, s.pitch, s.yaw)
-        return self.encoder.attitude_quaternion_encode(self.time_boot_ms, w, x, y, z, 0.0, 0.0, 0.0)
+        return self.encoder.attitude_quaternion_encode(self.time_boot_ms, w, x, y, z, *self.controller.angular_rates)
 
     def global_position_int(self):
         c = self.controller

@@ -194,3 +194,20 @@ def test_a_velocity_setpoint_stream_flies_at_that_velocity():
     run(c, c.t + 6.0, feed=velocity_target)
     np.testing.assert_allclose(c.model.state().velocity, [2.0, -1.0, 0.0], atol=0.05)
     assert c.position[2] == pytest.approx(start[2], abs=0.05)  # z was held
+
+
+def test_angular_rates_follow_the_turn():
+    c = controller()
+    airborne_at(c)
+    c.set_offboard_target(position_target(c, [0.0, 20.0, -5.0]))  # due east: the yaw turns from 0 to +90 deg
+    c.start_offboard()
+    yaws, rates = [], []
+
+    def record(t):
+        c.set_offboard_target(position_target(c, [0.0, 20.0, -5.0]))
+        yaws.append(c.model.state().yaw)
+        rates.append(c.angular_rates[2])
+
+    run(c, c.t + 3.0, feed=record)
+    assert max(rates) == pytest.approx(np.radians(90.0), rel=0.05)  # the multirotor's yaw_rate limit
+    assert np.sum(rates[1:]) * 0.02 == pytest.approx(yaws[-1] - yaws[0], abs=1e-6)  # rates[k]: the step before k
