@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 @dataclass
 class Counters:
     datagrams: int = 0  # UDP datagrams read, both links
+    kernel_drops: int = 0  # datagrams the kernel dropped before they were read (receive buffer full)
     bytes: int = 0
     messages: int = 0  # MAVLink messages decoded
     sent: int = 0  # datagrams sent
@@ -22,6 +23,7 @@ class Counters:
     def as_dict(self) -> dict:
         return {
             "datagrams": self.datagrams,
+            "kernel_drops": self.kernel_drops,
             "bytes": self.bytes,
             "messages": self.messages,
             "sent": self.sent,

@@ -6,7 +6,10 @@ sent it a valid MAVLink message on that link. (PX4 keeps the first source it lea
 one lets a client that restarts on another port be found again. A datagram of garbage teaches nothing.)
 
 Each datagram is decoded on its own: a truncated or corrupt packet at the end of one datagram is counted
-and dropped, and never swallows the start of the next datagram. Every datagram goes through a
+and dropped, and never swallows the start of the next datagram. Datagrams that a flood made the kernel drop
+before they could be read are counted too (Linux ``SO_RXQ_OVFL``: the socket's drop count travels with the
+next datagram queued after the drops), so every datagram sent to the simulator, up to the last one that got
+through, is either read or counted as dropped. Every datagram goes through a
 :class:`~mesh_sim.autopilot.delay_line.DelayLine` in each direction (the configured one-way latency).
 """
 
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import errno
 import socket
+import struct
 
 from agent.vehicles.mavlink_protocol import mavlink
 from mesh_sim.autopilot.counters import Counters
@@ -23,6 +27,8 @@ from mesh_sim.autopilot.streams import StreamSchedule
 MAX_DATAGRAM = 65535
 READ_BUDGET = 1000  # datagrams read per call, so that a flood cannot starve the streams; chosen here
 RECEIVE_BUFFER = 1 << 20  # bytes of socket receive buffer; chosen here
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)  # Linux: datagrams the kernel dropped, with each datagram
+ANCILLARY_SPACE = socket.CMSG_SPACE(4)
 
 
 def _reason(bad_data) -> str:
@@ -47,6 +53,7 @@ class Link:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
+            self.sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
             self.sock.bind(bind)
         except OSError:
             self.sock.close()
@@ -59,6 +66,7 @@ class Link:
         self._inbound = DelayLine(latency)
         self._outbound = DelayLine(latency)
         self._now = 0.0
+        self._kernel_drops = 0  # the socket's drop count as last reported
 
     def fileno(self) -> int:
         return self.sock.fileno()
@@ -71,7 +79,7 @@ class Link:
         """Read what the socket holds (at most :data:`READ_BUDGET` datagrams) into the inbound delay line."""
         for _ in range(READ_BUDGET):
             try:
-                data, sender = self.sock.recvfrom(MAX_DATAGRAM)
+                data, ancillary, _, sender = self.sock.recvmsg(MAX_DATAGRAM, ANCILLARY_SPACE)
             except (BlockingIOError, InterruptedError):
                 return
             except OSError:  # e.g. ECONNREFUSED reported for an earlier send
@@ -79,7 +87,15 @@ class Link:
                 continue
             self.counters.datagrams += 1
             self.counters.bytes += len(data)
+            self._count_kernel_drops(ancillary)
             self._inbound.push(now, (data, sender))
+
+    def _count_kernel_drops(self, ancillary) -> None:
+        for level, kind, value in ancillary:
+            if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(value) >= 4:
+                drops = struct.unpack("=I", value[:4])[0]
+                self.counters.kernel_drops += (drops - self._kernel_drops) & 0xFFFFFFFF
+                self._kernel_drops = drops
 
     def messages(self, now: float) -> list:
         """The MAVLink messages whose datagrams have come out of the delay line by ``now``."""
