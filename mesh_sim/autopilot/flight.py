@@ -110,7 +110,7 @@ class FlightController:
             return mavlink.MAV_LANDED_STATE_TAKEOFF
         if not self.airborne:
             return mavlink.MAV_LANDED_STATE_ON_GROUND
-        if self._target[2] >= -GROUND_TOLERANCE:
+        if self._setpoint().position[2] >= -GROUND_TOLERANCE:  # heading for the ground
             return mavlink.MAV_LANDED_STATE_LANDING
         return mavlink.MAV_LANDED_STATE_IN_AIR
 

@@ -211,3 +211,15 @@ def test_angular_rates_follow_the_turn():
     run(c, c.t + 3.0, feed=record)
     assert max(rates) == pytest.approx(np.radians(90.0), rel=0.05)  # the multirotor's yaw_rate limit
     assert np.sum(rates[1:]) * 0.02 == pytest.approx(yaws[-1] - yaws[0], abs=1e-6)  # rates[k]: the step before k
+
+
+def test_landed_state_follows_an_offboard_descent_to_the_ground():
+    c = controller()
+    airborne_at(c)
+    c.set_offboard_target(position_target(c, [0.0, 0.0, -5.0]))
+    c.start_offboard()
+    assert c.landed_state == mavlink.MAV_LANDED_STATE_IN_AIR
+    c.set_offboard_target(position_target(c, [0.0, 0.0, 0.0]))
+    assert c.landed_state == mavlink.MAV_LANDED_STATE_LANDING
+    run(c, c.t + 10.0, feed=lambda t: c.set_offboard_target(position_target(c, [0.0, 0.0, 0.0])))
+    assert c.landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND and not c.airborne
