@@ -14,7 +14,12 @@
 * ``skymesh compare BEFORE AFTER [--plain] [--limit N]`` — compare two run folders exactly, volatile fields
   (pids, CPU and wall times, ...) aside (``mesh_sim.run_compare``): exit 0 identical, 1 different;
 * ``skymesh compare --tree BEFORE_ROOT AFTER_ROOT [--details]`` — pair the run folders of two roots by
-  name, one line per pair.
+  name, one line per pair;
+* ``skymesh autopilot --instance I [--vehicle multirotor|fixed_wing] [--north M] [--east M] [--heading DEG]
+  [--latency-ms MS] [--offboard-port P] [--gcs-port P] ...`` — a MAVLink autopilot simulator that behaves like
+  PX4 SITL instance ``I`` (a subset) around the kinematic vehicle model (``mesh_sim.autopilot``; the same as
+  ``python -m mesh_sim.autopilot``): it binds 14580+I and sends to 14540+I (offboard), binds 18570+I and sends
+  to 14550 (ground station), until SIGTERM / SIGINT, ``--duration`` or the death of ``--parent-pid``.
 
 Exit codes: 0 success, 1 a run that failed (a child died) or runs that differ, 2 usage error (unknown
 benchmark or scenario, bad settings, not a run folder), 130 interrupted.
@@ -29,6 +34,7 @@ from pathlib import Path
 
 from agent.beliefs.tracking_config import POLICIES
 from agent.sensors.registry import SENSORS
+from mesh_sim.autopilot.options import add_arguments as add_autopilot_arguments
 from mesh_sim.bench import BENCHMARKS
 from mesh_sim.bench.common import make_console, write_json
 
@@ -118,6 +124,11 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--rtol", type=float, default=0.0,
                          help="floats equal to this relative tolerance, arrays compared by their sums (default 0: "
                               "bit for bit); e.g. 1e-6 across numpy/SciPy/OpenCV releases")
+
+    autopilot = commands.add_parser("autopilot", help="a PX4-SITL-like MAVLink autopilot simulator (one vehicle)",
+                                    description="A MAVLink autopilot simulator that behaves like PX4 SITL instance I "
+                                                "(a subset) around skymesh's kinematic vehicle models.")
+    add_autopilot_arguments(autopilot)
     return parser
 
 
@@ -278,6 +289,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _view(args)
     if args.command == "compare":
         return _compare(args)
+    if args.command == "autopilot":
+        from mesh_sim.autopilot.cli import run_from_args
+
+        return run_from_args(args)
     if args.command == "stress":
         args.name, args.list = "stress", False
         return _bench(args)

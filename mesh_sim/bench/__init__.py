@@ -145,6 +145,12 @@ BENCHMARKS: dict[str, Benchmark] = {
             "without GPS fault isolation, fault detection delay",
         ),
         Benchmark(
+            "mavlink",
+            "mesh_sim.bench.mavlink",
+            "the PX4-like autopilot simulator under a pymavlink client: setpoint response vs the bare pymavlink UDP "
+            "round trip, telemetry rates achieved vs requested, CPU per simulator process",
+        ),
+        Benchmark(
             "particles",
             "mesh_sim.bench.particles",
             "particle fusion (Merino Alg. 5.2 GMM and Alg. 5.3 LOP) time and accuracy vs particle count 200/500/2000",
