@@ -11,6 +11,9 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[test]'
+	# MAVProxy, headless, as a ground station in the autopilot tests: its declared dependencies (opencv-python,
+	# vtk: ~565 MB, for its map and console) would clash with opencv-python-headless, and headless needs none
+	$(BIN)/python -m pip install -q --no-deps mavproxy==1.8.75
 	touch $(STAMP)
 
 demo: $(STAMP)
