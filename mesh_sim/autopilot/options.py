@@ -30,6 +30,7 @@ class AutopilotOptions:
     instance: int = 0
     sysid: int | None = None  # None: 1 + instance
     vehicle: str = "multirotor"
+    vehicle_params: tuple[tuple[str, float], ...] = ()  # the model's [vehicle] keys, e.g. (("max_speed", 12.0),)
     north: float = 0.0  # start position [m] from the origin
     east: float = 0.0
     heading_deg: float = 0.0
@@ -79,6 +80,18 @@ def _origin(text: str) -> tuple[float, float, float]:
     return lat, lon, alt
 
 
+def _vehicle_param(text: str) -> tuple[str, float]:
+    """``max_speed=12`` -> ``("max_speed", 12.0)``: one ``[vehicle]`` key of the kinematic model."""
+    key, sep, value = text.partition("=")
+    try:
+        number = float(value)
+    except ValueError:
+        number = None
+    if not sep or not key or number is None:
+        raise argparse.ArgumentTypeError(f"expected KEY=NUMBER (a [vehicle] key), got {text!r}")
+    return key, number
+
+
 def _port(text: str) -> int:
     value = int(text)
     if not 0 <= value <= 65535:
@@ -105,6 +118,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--instance", type=int, default=0, help="PX4 SITL instance number I (ports, system id)")
     parser.add_argument("--sysid", type=int, help="MAVLink system id (default 1 + I)")
     parser.add_argument("--vehicle", choices=["multirotor", "fixed_wing"], default="multirotor")
+    parser.add_argument("--vehicle-param", type=_vehicle_param, action="append", default=[], dest="vehicle_params",
+                        metavar="KEY=NUMBER", help="a [vehicle] key of the kinematic model, e.g. max_speed=12 "
+                        "(repeatable; a scenario's keys, as skymesh run --vehicle mavlink passes them)")
     parser.add_argument("--north", type=float, default=0.0, help="start position north of the origin [m]")
     parser.add_argument("--east", type=float, default=0.0, help="start position east of the origin [m]")
     parser.add_argument("--heading", type=float, default=0.0, dest="heading_deg", help="start heading [deg]")
@@ -127,4 +143,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def options_from_args(args: argparse.Namespace) -> AutopilotOptions:
     fields = AutopilotOptions.__dataclass_fields__
-    return AutopilotOptions(**{name: getattr(args, name) for name in fields if hasattr(args, name)})
+    values = {name: getattr(args, name) for name in fields if hasattr(args, name)}
+    values["vehicle_params"] = tuple(values.get("vehicle_params", ()))
+    return AutopilotOptions(**values)

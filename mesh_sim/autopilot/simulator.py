@@ -43,7 +43,8 @@ class Simulator:
     def __init__(self, options: AutopilotOptions):
         self.options = options
         sysid = options.system_id
-        model = vehicle_from_config({"kind": options.vehicle}, [options.north, options.east, 0.0],
+        model = vehicle_from_config({"kind": options.vehicle, **dict(options.vehicle_params)},
+                                    [options.north, options.east, 0.0],
                                     math.radians(options.heading_deg))
         self.params = Params(MAV_SYS_ID=sysid, MAV_TYPE=VEHICLE_TYPES[options.vehicle])
         battery = Battery(flight_time=options.flight_time, remaining=options.battery)
@@ -149,6 +150,9 @@ def run(options: AutopilotOptions, stop: threading.Event) -> int:
         simulator = Simulator(options)
     except OSError as error:
         print(f"skymesh autopilot: cannot bind its ports: {error}", flush=True)
+        return 2
+    except ValueError as error:  # a --vehicle-param the model refuses
+        print(f"skymesh autopilot: {error}", flush=True)
         return 2
     try:
         print(json.dumps(simulator.describe()), flush=True)

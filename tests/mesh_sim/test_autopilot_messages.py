@@ -289,3 +289,36 @@ def test_sys_status_and_battery_status_report_the_battery_and_whether_it_may_arm
     assert status.battery_remaining == 10 and pack.battery_remaining == 10
     assert pack.charge_state == mavlink.MAV_BATTERY_CHARGE_STATE_LOW
     assert pack.voltages[:5] == [3645] * 4 + [65535]  # 3.6 V + 0.1 x 0.45 V per cell; no fifth cell
+
+
+def test_the_scenarios_vehicle_keys_reach_the_model():
+    from mesh_sim.autopilot.options import options_from_args
+    from mesh_sim.autopilot.simulator import Simulator
+    from mesh_sim.cli import build_parser
+
+    args = ["autopilot", "--offboard-port", "0", "--gcs-port", "0", "--vehicle-param", "max_speed=12.5",
+            "--vehicle-param", "max_accel=4"]
+    simulator = Simulator(options_from_args(build_parser().parse_args(args)))
+    try:
+        assert (simulator.controller.model.max_speed, simulator.controller.model.max_accel) == (12.5, 4.0)
+    finally:
+        simulator.close()
+
+
+@pytest.mark.parametrize("text", ["max_speed", "max_speed=fast", "=3"])  # no value, not a number, no key
+def test_a_malformed_vehicle_param_is_a_usage_error(text):
+    from mesh_sim.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["autopilot", "--vehicle-param", text])
+
+
+def test_a_vehicle_param_the_model_refuses_stops_the_simulator_with_exit_2(capsys):
+    import threading
+
+    from mesh_sim.autopilot.options import AutopilotOptions
+    from mesh_sim.autopilot.simulator import run
+
+    options = AutopilotOptions(offboard_port=0, gcs_port=0, vehicle_params=(("warp_factor", 9.0),))
+    assert run(options, threading.Event()) == 2
+    assert "warp_factor" in capsys.readouterr().out
