@@ -42,6 +42,8 @@ STREAMS = {
 }
 WARMUP_SETPOINTS = 5  # setpoints streamed before PX4 is asked for OFFBOARD (chosen here: 0.5 s at 10 Hz)
 POLL = 0.02  # s
+ASK_AGAIN = 1.0  # s between requests for the origin and home (chosen here)
+CONFIRM_TIMEOUT = 3.0  # s for the HEARTBEAT to show a new mode (three 1 Hz heartbeats; chosen here)
 
 
 def wait_until(condition, timeout: float, what: str) -> None:
@@ -63,24 +65,25 @@ def request_streams(commander) -> None:
 
 
 def wait_for_position(vehicle) -> None:
-    """Until the vehicle knows where it is in the scenario's frame (step 2 of the module docstring)."""
+    """Until the vehicle knows where it is in the scenario's frame (step 2 of the module docstring); the origin
+    and home are asked for again every :data:`ASK_AGAIN` seconds (an autopilot without a GPS fix has neither)."""
     deadline = time.monotonic() + vehicle.config.position_timeout
-    telemetry = vehicle.telemetry
-    while telemetry.local is None or vehicle.frames() is None:
+
+    def located() -> bool:
+        return vehicle.telemetry.local is not None and vehicle.frames() is not None
+
+    while not located():
+        if time.monotonic() > deadline:
+            raise LinkError(f"timed out after {vehicle.config.position_timeout:g} s waiting for a local position "
+                            f"and its origin (GPS_GLOBAL_ORIGIN or HOME_POSITION)")
         for message in (mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, mavlink.MAVLINK_MSG_ID_HOME_POSITION):
             try:
                 vehicle.commander.run(mavlink.MAV_CMD_REQUEST_MESSAGE, message)
-            except MavlinkError as error:  # not ready yet (no GPS fix): ask again
+            except MavlinkError as error:  # not ready yet: ask again
                 log.debug("request for message %d: %s", message, error)
-        remaining = deadline - time.monotonic()
-        if remaining <= 0:
-            raise LinkError(f"timed out after {vehicle.config.position_timeout:g} s waiting for a local position "
-                            f"and its origin (GPS_GLOBAL_ORIGIN or HOME_POSITION)")
-        try:
-            wait_until(lambda: telemetry.local is not None and vehicle.frames() is not None, min(1.0, remaining),
-                       "a position")
-        except LinkError:
-            continue
+        asked = time.monotonic()
+        while not located() and time.monotonic() - asked < ASK_AGAIN:
+            time.sleep(POLL)
 
 
 def set_mode(vehicle, custom_main: int, custom_sub: int = 0) -> None:
@@ -93,25 +96,40 @@ def arm(vehicle) -> None:
         vehicle.commander.run(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
 
 
+def confirmed(vehicle, mode: int) -> None:
+    """Wait for the HEARTBEAT that shows the vehicle armed in ``mode`` (an ACK says the command was taken; the
+    heartbeat, sent at 1 Hz, says it took effect)."""
+    def done() -> bool:
+        heartbeat = vehicle.telemetry.heartbeat
+        return heartbeat.armed and vehicle.mode_of(heartbeat.custom_mode) == mode
+
+    wait_until(done, CONFIRM_TIMEOUT, f"a HEARTBEAT showing the vehicle armed in custom mode {mode}")
+
+
 def start_px4(vehicle) -> None:
     vehicle.begin_takeoff(stream_during_climb=True)
     wait_until(lambda: vehicle.setpoints_sent >= WARMUP_SETPOINTS, 5.0, "the setpoint stream to start")
     arm(vehicle)
     set_mode(vehicle, PX4_MAIN_OFFBOARD)
+    confirmed(vehicle, PX4_MAIN_OFFBOARD)
 
 
 def start_ardupilot(vehicle) -> None:
     set_mode(vehicle, ARDUCOPTER_GUIDED)
     arm(vehicle)
+    confirmed(vehicle, ARDUCOPTER_GUIDED)
     vehicle.begin_takeoff(stream_during_climb=False)
     vehicle.commander.run(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, vehicle.config.takeoff_altitude)
 
 
-STARTS = {"px4": start_px4, "ardupilot": start_ardupilot}
+STARTS = {"px4": (start_px4, PX4_MAIN_OFFBOARD), "ardupilot": (start_ardupilot, ARDUCOPTER_GUIDED)}
 
 
-def start(vehicle) -> None:
-    """The whole start-up of the module docstring for ``vehicle.config.autopilot``."""
+def start(vehicle) -> int:
+    """The whole start-up of the module docstring for ``vehicle.config.autopilot``; returns the mode (PX4 main
+    mode, ArduPilot custom mode) the vehicle must stay in."""
     request_streams(vehicle.commander)
     wait_for_position(vehicle)
-    STARTS[vehicle.config.autopilot](vehicle)
+    run, mode = STARTS[vehicle.config.autopilot]
+    run(vehicle)
+    return mode

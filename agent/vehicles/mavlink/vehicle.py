@@ -8,7 +8,8 @@ the position known, and the vehicle armed, in OFFBOARD (PX4) or GUIDED (ArduPilo
 * :meth:`state` is the latest LOCAL_POSITION_NED and attitude, mapped into the scenario's NED frame
   (:class:`~agent.vehicles.mavlink.frames.FrameMap`), stamped with the autopilot's time on the local (Unix)
   clock (:class:`~agent.vehicles.mavlink.clock.BootClock`, exposed as :attr:`clock`), and ``fresh = False``
-  once the position is older than ``heartbeat_timeout`` — the agent does not sense with a stale pose;
+  once the position or the autopilot's heartbeat is older than ``heartbeat_timeout`` — the agent does not sense
+  with a stale pose;
 * :meth:`set_setpoint` replaces the setpoint that the link's thread streams as SET_POSITION_TARGET_LOCAL_NED
   (position + velocity feed-forward, :mod:`agent.vehicles.mavlink.guidance`) at ``setpoint_rate_hz``;
 * :meth:`step` does not wait: the real vehicle moves on its own clock. It watches the health (below) and
@@ -41,7 +42,7 @@ from agent.vehicles.mavlink.frames import FrameMap
 from agent.vehicles.mavlink.guidance import setpoint_motion
 from agent.vehicles.mavlink.link import MavlinkLink
 from agent.vehicles.mavlink.telemetry import GimbalAttitude, Telemetry
-from agent.vehicles.mavlink_protocol import ARDUCOPTER_GUIDED, PX4_MAIN_OFFBOARD, mavlink, px4_modes
+from agent.vehicles.mavlink_protocol import mavlink, px4_modes
 
 log = logging.getLogger("skymesh.mavlink")
 
@@ -80,8 +81,7 @@ class MavlinkVehicle:
             self.link.every(1.0, self.link.heartbeat)
             self.link.every(TIMESYNC_PERIOD, self._timesync)
             self.link.every(1.0 / config.setpoint_rate_hz, self._stream)
-            startup.start(self)
-            self._mode = PX4_MAIN_OFFBOARD if config.autopilot == "px4" else ARDUCOPTER_GUIDED
+            self._mode = startup.start(self)
         except BaseException:
             self.close()
             raise
@@ -96,8 +96,12 @@ class MavlinkVehicle:
             position=frames.position_to_scenario(local.position),
             velocity=frames.vector_to_scenario(local.velocity),
             yaw=wrap_angle(yaw + frames.yaw_offset), roll=roll, pitch=pitch,
-            fresh=time.monotonic() - local.arrival <= self.config.heartbeat_timeout,
+            fresh=self._alive(local) and self._alive(self.telemetry.heartbeat),
         )
+
+    def _alive(self, record) -> bool:
+        """``record`` (a position, a heartbeat) arrived within ``heartbeat_timeout``."""
+        return record is not None and time.monotonic() - record.arrival <= self.config.heartbeat_timeout
 
     def set_setpoint(self, setpoint: Setpoint) -> None:
         if not isinstance(setpoint, Setpoint):
@@ -126,15 +130,16 @@ class MavlinkVehicle:
     @property
     def health_reason(self) -> str:
         """Why the vehicle is not flying the agent's setpoints (``""`` when it is; module docstring)."""
-        now, timeout, telemetry = time.monotonic(), self.config.heartbeat_timeout, self.telemetry
-        heartbeat, local = telemetry.heartbeat, telemetry.local
-        if heartbeat is None or now - heartbeat.arrival > timeout:
-            return f"autopilot heartbeat lost for {now - (heartbeat.arrival if heartbeat else self._started):.1f} s"
-        if local is None or now - local.arrival > timeout:
+        telemetry = self.telemetry
+        heartbeat = telemetry.heartbeat
+        if not self._alive(heartbeat):
+            since = heartbeat.arrival if heartbeat is not None else self._started
+            return f"autopilot heartbeat lost for {time.monotonic() - since:.1f} s"
+        if not self._alive(telemetry.local):
             return "position stale"
         if not heartbeat.armed:
             return "disarmed"
-        if self._mode is not None and self._mode_of(heartbeat.custom_mode) != self._mode:
+        if self._mode is not None and self.mode_of(heartbeat.custom_mode) != self._mode:
             return f"autopilot left the commanded mode (custom_mode {heartbeat.custom_mode:#x})"
         if self._takeoff is not None:
             return "taking off"
@@ -161,7 +166,8 @@ class MavlinkVehicle:
         """Input the link refused, by reason (:mod:`agent.vehicles.mavlink.link`)."""
         return self.link.rejected
 
-    def _mode_of(self, custom_mode: int) -> int:
+    def mode_of(self, custom_mode: int) -> int:
+        """The mode a HEARTBEAT's ``custom_mode`` says: PX4's main mode, ArduPilot's mode number."""
         return px4_modes(custom_mode)[0] if self.config.autopilot == "px4" else custom_mode
 
     # -- frames and the take-off ---------------------------------------------------------------------------
