@@ -47,7 +47,7 @@ class FrameMap:
         home_local = as_vector(home_local, "home local position", 3)
         origin = ned_to_geodetic(-home_local, home_geodetic)
         error = geodetic_to_ned(*home_geodetic, origin) - home_local
-        return cls(scenario_origin, ned_to_geodetic(-error, origin))
+        return cls(scenario_origin, ned_to_geodetic(error, origin))  # moving the origin by e moves home by -e
 
     def position_to_scenario(self, local) -> np.ndarray:
         return geodetic_to_ned(*ned_to_geodetic(local, self.autopilot_origin), self.scenario_origin)

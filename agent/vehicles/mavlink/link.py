@@ -45,7 +45,7 @@ READS_PER_PASS = 64  # reads before the thread turns to its senders (chosen here
 IDLE_WAIT = 0.02  # s: the longest the thread sleeps in select() (chosen here)
 NOT_AUTOPILOTS = frozenset({mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_GIMBAL, mavlink.MAV_TYPE_ADSB,
                             mavlink.MAV_TYPE_ONBOARD_CONTROLLER})
-BAD_DATA_REASONS = (("Bad prefix", "garbage"), ("CRC", "crc"), ("unknown MAVLink message", "unknown_message"))
+BAD_DATA_REASONS = (("Bad prefix", "garbage"), ("CRC", "crc"))
 
 
 def bad_data_reason(text: str) -> str:
@@ -165,6 +165,9 @@ class MavlinkLink:
         kind = msg.get_type()
         if kind == "BAD_DATA":
             self.rejected[bad_data_reason(msg.reason)] += 1
+            return
+        if kind.startswith("UNKNOWN_"):  # pymavlink's MAVLink_unknown: a message id no dialect defines
+            self.rejected["unknown_message"] += 1
             return
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         if self.autopilot is None:
