@@ -89,6 +89,11 @@ class Setpoint:
             object.__setattr__(self, "orbit", (center, float(radius), int(direction)))
 
 
+class VehicleError(RuntimeError):
+    """A real vehicle cannot be reached or refuses what it is asked (the MAVLink vehicle's errors derive from it):
+    ``python -m agent`` stops with exit code 2 before the agent runs."""
+
+
 @runtime_checkable
 class Vehicle(Protocol):
     """What the agent needs from a vehicle (kinematic model or MAVLink).

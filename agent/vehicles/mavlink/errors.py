@@ -6,8 +6,10 @@ before the agent starts.
 
 from __future__ import annotations
 
+from agent.vehicles.base import VehicleError
 
-class MavlinkError(RuntimeError):
+
+class MavlinkError(VehicleError):
     """The MAVLink vehicle cannot do what was asked of it."""
 
 
