@@ -17,6 +17,7 @@ import socket
 import threading
 import time
 from collections import defaultdict
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -38,6 +39,21 @@ def connect(peer: ScriptedAutopilot, **params):
     """The MAVLink vehicle on ``peer``'s port (take-off to 3 m unless ``params`` say otherwise)."""
     config = {"kind": "mavlink", "url": f"udpin:127.0.0.1:{peer.address[1]}", "takeoff_altitude": 3.0, **params}
     return vehicle_from_config(config, [0.0, 0.0, -50.0], 0.0, SCENARIO_ORIGIN)
+
+
+@contextmanager
+def flying_vehicle(**params):
+    """A scripted autopilot and the MAVLink vehicle on it, taken off; both closed afterwards."""
+    peer = ScriptedAutopilot(free_udp_port())
+    try:
+        vehicle = connect(peer, **params)
+        try:
+            wait_for(lambda: vehicle.healthy)
+            yield peer, vehicle
+        finally:
+            vehicle.close()
+    finally:
+        peer.close()
 
 
 def wait_for(condition, timeout: float = 5.0) -> float:

@@ -12,17 +12,13 @@ import pytest
 
 from agent.vehicles.mavlink.link import MavlinkLink
 from agent.vehicles.mavlink_protocol import mavlink
-from tests.agent.mavlink_peer import ScriptedAutopilot, connect, free_udp_port, wait_for
+from tests.agent.mavlink_peer import flying_vehicle, free_udp_port, wait_for
 
 
 @pytest.fixture
 def flying():
-    peer = ScriptedAutopilot(free_udp_port())
-    vehicle = connect(peer)
-    wait_for(lambda: vehicle.healthy)
-    yield peer, vehicle
-    vehicle.close()
-    peer.close()
+    with flying_vehicle() as (peer, vehicle):
+        yield peer, vehicle
 
 
 def encoder(system: int = 1, component: int = 1):

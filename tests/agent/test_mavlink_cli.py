@@ -1,6 +1,6 @@
 """``python -m agent --mavlink URL``: a real agent process over a Zenoh router opened here flies the scripted
 autopilot; a URL that cannot be opened or an autopilot that never heartbeats is exit code 2 before the loop.
-Processes are stopped by PID and checked gone."""
+A process that hangs is killed by PID when its timeout runs out."""
 
 from __future__ import annotations
 
@@ -18,7 +18,6 @@ from agent.net.zenoh_transport import router_config
 from mesh_sim.launcher import free_port
 from mesh_sim.scenario import load
 from tests.agent.mavlink_peer import SCENARIO_ORIGIN, ScriptedAutopilot, free_udp_port
-from tests.processes import assert_all_gone
 
 pytestmark = pytest.mark.slow  # live agent processes over a Zenoh router
 
@@ -35,22 +34,16 @@ def run_agent(tmp_path: Path, url: str, duration: float = 2.0, **vehicle) -> tup
     scenario_file.write_text(json.dumps(raw))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = zenoh.open(router_config([endpoint]))
-    try:
-        proc = subprocess.Popen(
+    try:  # subprocess.run kills the process (by its PID) if it outlives the timeout
+        done = subprocess.run(
             [sys.executable, "-m", "agent", "--id", "uav0", "--index", "0", "--fleet", f"mav-{uuid.uuid4().hex[:8]}",
              "--scenario", str(scenario_file), "--connect", endpoint, "--out", str(tmp_path), "--mavlink", url,
              "--parent-pid", str(os.getpid())],
-            cwd=REPO, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-        try:
-            _, err = proc.communicate(timeout=90)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+            cwd=REPO, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+            timeout=90)
     finally:
         router.close()
-    assert_all_gone([proc.pid])
-    return proc.returncode, err
+    return done.returncode, done.stderr
 
 
 def test_the_agent_process_flies_the_autopilot(tmp_path):

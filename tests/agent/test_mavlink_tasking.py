@@ -15,7 +15,11 @@ from agent.net.keys import Keys
 from agent.plugins import Views
 from agent.vehicles import vehicle_from_config
 from tasking.assignment import AssignmentConfig
-from tests.agent.mavlink_peer import SCENARIO_ORIGIN, ScriptedAutopilot, connect, free_udp_port, wait_for
+from tests.agent.mavlink_peer import (
+    SCENARIO_ORIGIN,
+    flying_vehicle,
+    wait_for,
+)
 from tests.tasking.test_assignment import AREA, _Picture, _talk
 
 TARGET = np.array([110.0, -60.0])  # near the MAVLink vehicle's take-off point (120, -80) in the scenario
@@ -23,12 +27,8 @@ TARGET = np.array([110.0, -60.0])  # near the MAVLink vehicle's take-off point (
 
 @pytest.fixture
 def flying():
-    peer = ScriptedAutopilot(free_udp_port())
-    vehicle = connect(peer)
-    wait_for(lambda: vehicle.healthy)
-    yield peer, vehicle
-    vehicle.close()
-    peer.close()
+    with flying_vehicle() as (peer, vehicle):
+        yield peer, vehicle
 
 
 def exchange(me: str, vehicle, **config) -> AssignmentExchange:

@@ -14,7 +14,15 @@ import pytest
 from agent.vehicles.base import Setpoint, Vehicle
 from agent.vehicles.mavlink import CommandRefused, CommandTimeout
 from agent.vehicles.mavlink_protocol import PX4_MAIN_MANUAL, PX4_MAIN_OFFBOARD, mavlink, px4_custom_mode, px4_modes
-from tests.agent.mavlink_peer import ORIGIN, SCENARIO_ORIGIN, ScriptedAutopilot, connect, free_udp_port, wait_for
+from tests.agent.mavlink_peer import (
+    ORIGIN,
+    SCENARIO_ORIGIN,
+    ScriptedAutopilot,
+    connect,
+    flying_vehicle,
+    free_udp_port,
+    wait_for,
+)
 from tests.agent.test_plugins import assert_implements
 
 
@@ -26,10 +34,9 @@ def peer():
 
 
 @pytest.fixture
-def flying(peer):
-    vehicle = connect(peer)
-    yield peer, vehicle
-    vehicle.close()
+def flying():
+    with flying_vehicle() as (peer, vehicle):
+        yield peer, vehicle
 
 
 def scenario_to_local(ned) -> np.ndarray:

@@ -28,10 +28,10 @@ key                default                 meaning
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 
 from agent.vehicles.mavlink_protocol import mavlink
+from fusion.validation import positive
 
 AUTOPILOTS = ("px4", "ardupilot")
 URL_SCHEMES = ("udpin:", "udpout:", "udp:", "udpbcast:", "tcp:", "tcpin:")
@@ -69,10 +69,10 @@ class MavlinkConfig:
             raise ValueError(f"component_id: must be an integer in [1, 255], got {self.component_id!r}")
         for name in ("takeoff_altitude", "cruise_speed", "setpoint_rate_hz", "heartbeat_timeout", "connect_timeout",
                      "position_timeout", "command_timeout", "max_message_rate"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float) or not (math.isfinite(value)
-                                                                                     and value > 0):
-                raise ValueError(f"{name}: must be a positive number, got {value!r}")
+            try:
+                positive(name, getattr(self, name))
+            except ValueError as error:
+                raise ValueError(f"{name}: {error}") from None
         if isinstance(self.battery_reserve, bool) or not isinstance(self.battery_reserve, int | float) \
                 or not 0 <= self.battery_reserve < 1:
             raise ValueError(f"battery_reserve: must be a fraction in [0, 1), got {self.battery_reserve!r}")
