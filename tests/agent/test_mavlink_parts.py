@@ -18,6 +18,8 @@ from agent.vehicles.mavlink.clock import BootClock
 from agent.vehicles.mavlink.config import MavlinkConfig
 from agent.vehicles.mavlink.frames import FrameMap
 from agent.vehicles.mavlink.guidance import SETTLE_TIME, setpoint_motion
+from agent.vehicles.mavlink.vehicle import autopilot_kind
+from agent.vehicles.mavlink_protocol import mavlink
 from tests.agent.mavlink_peer import ORIGIN, SCENARIO_ORIGIN, free_udp_port
 
 
@@ -63,6 +65,12 @@ def test_no_heartbeat_is_a_clear_error_after_the_connect_timeout():
         vehicle_from_config({"kind": "mavlink", "url": f"udpin:127.0.0.1:{free_udp_port()}", "connect_timeout": 0.5},
                             [0.0, 0.0, -50.0], 0.0, SCENARIO_ORIGIN)
     assert time.monotonic() - start < 2.0
+
+
+def test_an_autopilot_neither_px4_nor_ardupilot_must_be_named():
+    with pytest.raises(LinkError, match="^autopilot: the HEARTBEAT says MAV_AUTOPILOT 2,"):
+        autopilot_kind(mavlink.MAV_AUTOPILOT_SLUGS)  # bad input: an autopilot whose start-up is not known here
+    assert autopilot_kind(mavlink.MAV_AUTOPILOT_PX4) == "px4"
 
 
 def test_timesync_takes_the_midpoint_of_the_shortest_round_trip():

@@ -98,7 +98,8 @@ def test_px4_start_up_streams_setpoints_then_arms_then_switches_to_offboard_and_
 def test_ardupilot_start_up_is_guided_arm_takeoff_and_streams_only_after_the_climb():
     ardupilot = ScriptedAutopilot(free_udp_port(), autopilot=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
     try:
-        vehicle = connect(ardupilot, autopilot="ardupilot")
+        vehicle = connect(ardupilot)  # autopilot = "auto": the HEARTBEAT says MAV_AUTOPILOT_ARDUPILOTMEGA
+        assert vehicle.autopilot == "ardupilot"
         commands = [m.command for m in ardupilot.messages("COMMAND_LONG")
                     if m.command not in (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE)]
         assert commands == [mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_COMPONENT_ARM_DISARM,

@@ -9,7 +9,8 @@ key                default                 meaning
                                            offboard link), ``udpout:host:port``, ``tcp:127.0.0.1:5760``
                                            (ArduPilot SITL), or a serial device such as ``/dev/ttyUSB0``
 ``baud``           57600                   serial baud rate (a SiK radio's default); ignored for UDP/TCP
-``autopilot``      ``"px4"``               ``"px4"`` or ``"ardupilot"``: the start-up sequence and modes
+``autopilot``      ``"auto"``              ``"px4"`` or ``"ardupilot"``: the start-up sequence and modes;
+                                           ``"auto"``: the HEARTBEAT's MAV_AUTOPILOT says
 ``takeoff_altitude`` 10.0                  metres above home at which the take-off ends
 ``cruise_speed``   5.0                     m/s: orbit speed and the default speed limit of a setpoint
 ``setpoint_rate_hz`` 10.0                  SET_POSITION_TARGET_LOCAL_NED stream rate (PX4 leaves OFFBOARD
@@ -33,7 +34,7 @@ from dataclasses import dataclass, fields
 from agent.vehicles.mavlink_protocol import mavlink
 from fusion.validation import positive
 
-AUTOPILOTS = ("px4", "ardupilot")
+AUTOPILOTS = ("auto", "px4", "ardupilot")
 URL_SCHEMES = ("udpin:", "udpout:", "udp:", "udpbcast:", "tcp:", "tcpin:")
 
 
@@ -41,7 +42,7 @@ URL_SCHEMES = ("udpin:", "udpout:", "udp:", "udpbcast:", "tcp:", "tcpin:")
 class MavlinkConfig:
     url: str
     baud: int = 57600
-    autopilot: str = "px4"
+    autopilot: str = "auto"
     takeoff_altitude: float = 10.0
     cruise_speed: float = 5.0
     setpoint_rate_hz: float = 10.0

@@ -176,7 +176,6 @@ class MavlinkLink:
                 return
             self.autopilot = source
             self.connection.mav.srcSystem = source[0]  # a component of the autopilot's vehicle
-            self.heard.set()
             log.info("MAVLink link %s: autopilot is system %d component %d", self.url, *source)
         if source[0] != self.autopilot[0]:
             self.rejected["other_system"] += 1
@@ -189,6 +188,8 @@ class MavlinkLink:
             self.rejected["bad_value"] += 1
             return
         self.received[kind] += 1
+        if not self.heard.is_set():
+            self.heard.set()  # after the handler took the first heartbeat: a waiter finds it there
 
     def heartbeat(self, mav) -> None:
         """This side's HEARTBEAT (a periodic sender, see the module docstring)."""

@@ -126,10 +126,10 @@ STARTS = {"px4": (start_px4, PX4_MAIN_OFFBOARD), "ardupilot": (start_ardupilot, 
 
 
 def start(vehicle) -> int:
-    """The whole start-up of the module docstring for ``vehicle.config.autopilot``; returns the mode (PX4 main
+    """The whole start-up of the module docstring for ``vehicle.autopilot``; returns the mode (PX4 main
     mode, ArduPilot custom mode) the vehicle must stay in."""
     request_streams(vehicle.commander)
     wait_for_position(vehicle)
-    run, mode = STARTS[vehicle.config.autopilot]
+    run, mode = STARTS[vehicle.autopilot]
     run(vehicle)
     return mode

@@ -7,7 +7,8 @@ counts it as ``bad_value``.
 
 Messages and their fields (MAVLink common.xml):
 
-* HEARTBEAT: ``base_mode`` (MAV_MODE_FLAG_SAFETY_ARMED), ``custom_mode`` (the flight mode), arrival time;
+* HEARTBEAT: ``base_mode`` (MAV_MODE_FLAG_SAFETY_ARMED), ``custom_mode`` (the flight mode), ``autopilot``
+  (MAV_AUTOPILOT), arrival time;
 * LOCAL_POSITION_NED: ``x, y, z`` [m], ``vx, vy, vz`` [m/s] in the autopilot's local frame, ``time_boot_ms``;
 * ATTITUDE (``roll, pitch, yaw`` [rad]) or ATTITUDE_QUATERNION (``q1..q4`` = w, x, y, z);
 * GLOBAL_POSITION_INT: ``lat, lon`` [degE7], ``alt`` (AMSL) and ``relative_alt`` [mm];
@@ -41,6 +42,7 @@ class Heartbeat:
     arrival: float  # local monotonic time [s]
     base_mode: int
     custom_mode: int
+    autopilot: int  # MAV_AUTOPILOT
 
     @property
     def armed(self) -> bool:
@@ -104,7 +106,7 @@ class Telemetry:
             handler(msg, arrival)
 
     def _on_heartbeat(self, msg, arrival: float) -> None:
-        self.heartbeat = Heartbeat(arrival, msg.base_mode, msg.custom_mode)
+        self.heartbeat = Heartbeat(arrival, msg.base_mode, msg.custom_mode, msg.autopilot)
 
     def _on_local_position_ned(self, msg, arrival: float) -> None:
         values = (msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz)

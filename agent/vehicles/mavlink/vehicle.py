@@ -38,6 +38,7 @@ from agent.vehicles.mavlink import startup
 from agent.vehicles.mavlink.clock import BootClock
 from agent.vehicles.mavlink.commands import Commander
 from agent.vehicles.mavlink.config import MavlinkConfig
+from agent.vehicles.mavlink.errors import LinkError
 from agent.vehicles.mavlink.frames import FrameMap
 from agent.vehicles.mavlink.guidance import setpoint_motion
 from agent.vehicles.mavlink.link import MavlinkLink
@@ -54,6 +55,17 @@ TAKEOFF_DONE = 0.95  # the take-off is over at this share of takeoff_altitude (c
 TIMESYNC_PERIOD = 1.0  # s (chosen here)
 
 
+KINDS = {mavlink.MAV_AUTOPILOT_PX4: "px4", mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA: "ardupilot"}
+
+
+def autopilot_kind(mav_autopilot: int) -> str:
+    """``"px4"`` or ``"ardupilot"`` from a HEARTBEAT's MAV_AUTOPILOT (``autopilot = "auto"``)."""
+    if mav_autopilot not in KINDS:
+        raise LinkError(f"autopilot: the HEARTBEAT says MAV_AUTOPILOT {mav_autopilot}, neither PX4 nor ArduPilot; "
+                        f"set autopilot = \"px4\" or \"ardupilot\" if it behaves like one")
+    return KINDS[mav_autopilot]
+
+
 class MavlinkVehicle:
     """The vehicle of the module docstring, for ``config`` in the scenario whose geodetic origin is
     ``scenario_origin`` (lat [deg], lon [deg], alt [m])."""
@@ -66,6 +78,7 @@ class MavlinkVehicle:
         self.max_speed = config.cruise_speed  # what the planner may assume
         self.setpoints_sent = self.stale_steps = 0
         self.commander: Commander | None = None
+        self.autopilot = config.autopilot  # "px4" or "ardupilot" once the autopilot is heard
         self._frames: tuple[tuple, FrameMap] | None = None
         self._setpoint: Setpoint | None = None
         self._takeoff: tuple[float, bool] | None = None  # (local z of the end of the climb, stream during it)
@@ -77,6 +90,8 @@ class MavlinkVehicle:
                                 max_message_rate=config.max_message_rate)
         try:
             target = self.link.wait_for_autopilot(config.connect_timeout)
+            self.autopilot = config.autopilot if config.autopilot != "auto" else autopilot_kind(
+                self.telemetry.heartbeat.autopilot)
             self.commander = Commander(self.link, target, config.command_timeout, config.command_attempts)
             self.link.every(1.0, self.link.heartbeat)
             self.link.every(TIMESYNC_PERIOD, self._timesync)
@@ -108,10 +123,6 @@ class MavlinkVehicle:
             raise TypeError(f"setpoint must be a Setpoint, got {type(setpoint).__name__}")
         self._setpoint = setpoint
 
-    @property
-    def setpoint(self) -> Setpoint | None:
-        return self._setpoint
-
     def step(self, dt: float) -> None:
         """Non-blocking (module docstring): watch the health, count a step with a stale pose."""
         if not self.state().fresh:
@@ -133,8 +144,7 @@ class MavlinkVehicle:
         telemetry = self.telemetry
         heartbeat = telemetry.heartbeat
         if not self._alive(heartbeat):
-            since = heartbeat.arrival if heartbeat is not None else self._started
-            return f"autopilot heartbeat lost for {time.monotonic() - since:.1f} s"
+            return f"autopilot heartbeat lost (none for over {self.config.heartbeat_timeout:g} s)"
         if not self._alive(telemetry.local):
             return "position stale"
         if not heartbeat.armed:
@@ -168,7 +178,7 @@ class MavlinkVehicle:
 
     def mode_of(self, custom_mode: int) -> int:
         """The mode a HEARTBEAT's ``custom_mode`` says: PX4's main mode, ArduPilot's mode number."""
-        return px4_modes(custom_mode)[0] if self.config.autopilot == "px4" else custom_mode
+        return px4_modes(custom_mode)[0] if self.autopilot == "px4" else custom_mode
 
     # -- frames and the take-off ---------------------------------------------------------------------------
     def frames(self) -> FrameMap | None:
