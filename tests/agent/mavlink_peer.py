@@ -1,5 +1,5 @@
 """A scripted autopilot for the MAVLink vehicle's tests: the autopilot's side of the wire, in real MAVLink 2
-bytes over a real UDP socket on loopback.
+bytes over a real socket on loopback: UDP by default, or TCP (``tcp=True``) as ArduPilot SITL serves it.
 
 Like PX4 SITL's offboard link it sends from its own port to the companion computer's (``udpin``) port. It
 heartbeats (1 Hz), streams LOCAL_POSITION_NED and ATTITUDE (20 Hz), SYS_STATUS, BATTERY_STATUS and
@@ -37,14 +37,15 @@ SCENARIO_ORIGIN = ned_to_geodetic([-120.0, 80.0, 15.0], ORIGIN)
 
 def connect(peer: ScriptedAutopilot, **params):
     """The MAVLink vehicle on ``peer``'s port (take-off to 3 m unless ``params`` say otherwise)."""
-    config = {"kind": "mavlink", "url": f"udpin:127.0.0.1:{peer.address[1]}", "takeoff_altitude": 3.0, **params}
+    url = f"tcp:127.0.0.1:{peer.address[1]}" if peer.tcp else f"udpin:127.0.0.1:{peer.address[1]}"
+    config = {"kind": "mavlink", "url": url, "takeoff_altitude": 3.0, **params}
     return vehicle_from_config(config, [0.0, 0.0, -50.0], 0.0, SCENARIO_ORIGIN)
 
 
 @contextmanager
 def flying_vehicle(**params):
     """A scripted autopilot and the MAVLink vehicle on it, taken off; both closed afterwards."""
-    peer = ScriptedAutopilot(free_udp_port())
+    peer = ScriptedAutopilot(free_port())
     try:
         vehicle = connect(peer, **params)
         try:
@@ -65,23 +66,29 @@ def wait_for(condition, timeout: float = 5.0) -> float:
     return time.monotonic()
 
 
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+def free_port(kind: int = socket.SOCK_DGRAM) -> int:
+    """A free loopback port (UDP by default, TCP with ``socket.SOCK_STREAM``)."""
+    with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
 
 
 class ScriptedAutopilot:
-    """The autopilot of the module docstring, sending to ``127.0.0.1:port``. ``autopilot``: the HEARTBEAT's
+    """The autopilot of the module docstring, sending to ``127.0.0.1:port`` (with ``tcp``: serving TCP on ``port``
+    to the one client that connects, like ArduPilot SITL's 5760). ``autopilot``: the HEARTBEAT's
     MAV_AUTOPILOT; ``origin``: its EKF origin; ``start``: its local NED position; ``boot_offset``: seconds it
     has been up when created (its ``time_boot_ms`` starts there)."""
 
     def __init__(self, port: int, *, system: int = 1, autopilot: int = mavlink.MAV_AUTOPILOT_PX4,
                  origin=ORIGIN, start=(0.0, 0.0, 0.0), boot_offset: float = 100.0, battery: int = 80,
-                 answer_timesync: bool = True):
-        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.socket.bind(("127.0.0.1", 0))
+                 answer_timesync: bool = True, tcp: bool = False):
+        self.tcp = tcp
+        self.socket = socket.socket(socket.AF_INET, socket.SOCK_STREAM if tcp else socket.SOCK_DGRAM)
+        self.socket.bind(("127.0.0.1", port if tcp else 0))
+        if tcp:
+            self.socket.listen(1)
         self.socket.setblocking(False)
+        self.client: socket.socket | None = None  # the TCP client, once connected
         self.address = ("127.0.0.1", port)
         self.system, self.autopilot, self.origin = system, autopilot, origin
         self.mav = mavlink.MAVLink(self, srcSystem=system, srcComponent=1)
@@ -107,9 +114,21 @@ class ScriptedAutopilot:
 
     # -- the pymavlink encoder's file, and raw bytes --------------------------------------------------
     def write(self, data: bytes) -> None:
-        self.socket.sendto(data, self.address)
+        if not self.tcp:
+            self.socket.sendto(data, self.address)
+        elif self.client is not None:
+            try:
+                self.client.sendall(data)
+            except OSError:  # the client went away
+                self.hang_up()
 
     send_raw = write
+
+    def hang_up(self) -> None:
+        """Close the TCP connection (the autopilot restarts or the cable is pulled)."""
+        client, self.client = self.client, None
+        if client is not None:
+            client.close()
 
     def boot_ms(self) -> int:
         return int((time.monotonic() - self._created) * 1e3)
@@ -117,6 +136,7 @@ class ScriptedAutopilot:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2.0)
+        self.hang_up()
         self.socket.close()
 
     def messages(self, kind: str) -> list:
@@ -194,11 +214,22 @@ class ScriptedAutopilot:
 
     # -- what the vehicle sends -----------------------------------------------------------------------------
     def _receive(self) -> None:
-        while True:
+        if self.tcp and self.client is None:
             try:
-                data = self.socket.recv(65536)
+                self.client, _ = self.socket.accept()
+                self.client.setblocking(False)
             except BlockingIOError:
                 return
+        source = self.client if self.tcp else self.socket
+        while source is not None:
+            try:
+                data = source.recv(65536)
+            except BlockingIOError:
+                return
+            except OSError:
+                data = b""
+            if not data:  # the TCP client closed
+                return self.hang_up()
             for msg in self.parser.parse_buffer(data) or ():
                 self.received[msg.get_type()].append((time.monotonic(), msg))
                 handler = getattr(self, "_on_" + msg.get_type().lower(), None)

@@ -12,7 +12,7 @@ import pytest
 
 from agent.vehicles.mavlink.link import MavlinkLink
 from agent.vehicles.mavlink_protocol import mavlink
-from tests.agent.mavlink_peer import flying_vehicle, free_udp_port, wait_for
+from tests.agent.mavlink_peer import flying_vehicle, free_port, wait_for
 
 
 @pytest.fixture
@@ -112,7 +112,7 @@ def test_a_flood_is_dropped_unparsed_and_the_setpoint_stream_keeps_its_rate(flyi
 
 
 def test_a_ground_station_heartbeat_is_not_taken_for_the_autopilot():
-    port = free_udp_port()
+    port = free_port()
     link = MavlinkLink(f"udpin:127.0.0.1:{port}", lambda msg: None)
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
 import uuid
@@ -15,9 +16,8 @@ import pytest
 import zenoh
 
 from agent.net.zenoh_transport import router_config
-from mesh_sim.launcher import free_port
 from mesh_sim.scenario import load
-from tests.agent.mavlink_peer import SCENARIO_ORIGIN, ScriptedAutopilot, free_udp_port
+from tests.agent.mavlink_peer import SCENARIO_ORIGIN, ScriptedAutopilot, free_port
 
 pytestmark = pytest.mark.slow  # live agent processes over a Zenoh router
 
@@ -32,7 +32,7 @@ def run_agent(tmp_path: Path, url: str, duration: float = 2.0, **vehicle) -> tup
            "vehicle": {"kind": "mavlink", "url": "udpin:127.0.0.1:1", **vehicle}}
     scenario_file = tmp_path / "scenario.json"
     scenario_file.write_text(json.dumps(raw))
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     router = zenoh.open(router_config([endpoint]))
     try:  # subprocess.run kills the process (by its PID) if it outlives the timeout
         done = subprocess.run(
@@ -47,7 +47,7 @@ def run_agent(tmp_path: Path, url: str, duration: float = 2.0, **vehicle) -> tup
 
 
 def test_the_agent_process_flies_the_autopilot(tmp_path):
-    peer = ScriptedAutopilot(free_udp_port())
+    peer = ScriptedAutopilot(free_port())
     try:
         code, err = run_agent(tmp_path, f"udpin:127.0.0.1:{peer.address[1]}", takeoff_altitude=3.0)
     finally:
@@ -61,7 +61,7 @@ def test_the_agent_process_flies_the_autopilot(tmp_path):
 
 
 def test_an_autopilot_that_never_heartbeats_is_exit_code_2(tmp_path):
-    url = f"udpin:127.0.0.1:{free_udp_port()}"  # bad input: nobody sends on this port
+    url = f"udpin:127.0.0.1:{free_port()}"  # bad input: nobody sends on this port
     code, err = run_agent(tmp_path, url, connect_timeout=1.0)
     assert code == 2
     assert f"no autopilot HEARTBEAT on '{url}' within 1 s" in err

@@ -20,7 +20,7 @@ from agent.vehicles.mavlink.frames import FrameMap
 from agent.vehicles.mavlink.guidance import SETTLE_TIME, setpoint_motion
 from agent.vehicles.mavlink.vehicle import autopilot_kind
 from agent.vehicles.mavlink_protocol import mavlink
-from tests.agent.mavlink_peer import ORIGIN, SCENARIO_ORIGIN, free_udp_port
+from tests.agent.mavlink_peer import ORIGIN, SCENARIO_ORIGIN, free_port
 
 
 @pytest.mark.parametrize("params, key", [
@@ -62,7 +62,7 @@ def test_a_link_that_cannot_be_opened_is_a_clear_error():
 def test_no_heartbeat_is_a_clear_error_after_the_connect_timeout():
     start = time.monotonic()
     with pytest.raises(LinkError, match=r"no autopilot HEARTBEAT on 'udpin:127.0.0.1:\d+' within 0.5 s"):
-        vehicle_from_config({"kind": "mavlink", "url": f"udpin:127.0.0.1:{free_udp_port()}", "connect_timeout": 0.5},
+        vehicle_from_config({"kind": "mavlink", "url": f"udpin:127.0.0.1:{free_port()}", "connect_timeout": 0.5},
                             [0.0, 0.0, -50.0], 0.0, SCENARIO_ORIGIN)
     assert time.monotonic() - start < 2.0
 

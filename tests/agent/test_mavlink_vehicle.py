@@ -5,6 +5,7 @@ stream and its frames, the heartbeat watch, the time mapping and the gimbal."""
 from __future__ import annotations
 
 import math
+import socket
 import time
 
 import numpy as np
@@ -20,7 +21,7 @@ from tests.agent.mavlink_peer import (
     ScriptedAutopilot,
     connect,
     flying_vehicle,
-    free_udp_port,
+    free_port,
     wait_for,
 )
 from tests.agent.test_plugins import assert_implements
@@ -28,7 +29,7 @@ from tests.agent.test_plugins import assert_implements
 
 @pytest.fixture
 def peer():
-    autopilot = ScriptedAutopilot(free_udp_port())
+    autopilot = ScriptedAutopilot(free_port())
     yield autopilot
     autopilot.close()
 
@@ -96,7 +97,7 @@ def test_px4_start_up_streams_setpoints_then_arms_then_switches_to_offboard_and_
 
 
 def test_ardupilot_start_up_is_guided_arm_takeoff_and_streams_only_after_the_climb():
-    ardupilot = ScriptedAutopilot(free_udp_port(), autopilot=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
+    ardupilot = ScriptedAutopilot(free_port(), autopilot=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
     try:
         vehicle = connect(ardupilot)  # autopilot = "auto": the HEARTBEAT says MAV_AUTOPILOT_ARDUPILOTMEGA
         assert vehicle.autopilot == "ardupilot"
@@ -237,7 +238,7 @@ def test_the_autopilot_time_maps_to_the_local_clock_by_timesync(flying):
 
 
 def test_without_timesync_the_stamps_give_the_offset():
-    quiet = ScriptedAutopilot(free_udp_port(), answer_timesync=False, boot_offset=5000.0)
+    quiet = ScriptedAutopilot(free_port(), answer_timesync=False, boot_offset=5000.0)
     try:
         vehicle = connect(quiet)
         assert vehicle.clock.source == "stamps"
@@ -272,3 +273,22 @@ def test_metrics_report_the_link(flying):
     metrics = vehicle.metrics()["vehicle"]
     assert metrics["kind"] == "mavlink" and metrics["setpoints_sent"] > 0 and metrics["commands_sent"] >= 10
     assert metrics["clock"]["source"] in ("timesync", "stamps")
+
+
+def test_ardupilot_over_tcp_flies_and_survives_the_autopilot_closing_the_connection():
+    ardupilot = ScriptedAutopilot(free_port(socket.SOCK_STREAM), autopilot=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                  tcp=True)  # as ArduPilot SITL serves tcp:127.0.0.1:5760
+    try:
+        vehicle = connect(ardupilot)
+        try:
+            wait_for(lambda: vehicle.healthy)
+            ardupilot.silent.set()  # the autopilot restarts: it closes the connection and is silent a while
+            ardupilot.hang_up()
+            wait_for(lambda: not vehicle.healthy, timeout=4.0)
+            assert vehicle.rejected["link_closed"] >= 1 and vehicle.link._thread.is_alive()
+            ardupilot.silent.clear()
+            wait_for(lambda: vehicle.healthy, timeout=5.0)  # the link reconnected; the heartbeat is back
+        finally:
+            vehicle.close()
+    finally:
+        ardupilot.close()

@@ -24,12 +24,16 @@ before a MAVLink start marker), ``crc`` (a frame whose checksum fails: corrupted
 ``bad_value`` (a message the handler refused: a NaN position, a latitude beyond 90°), ``flood`` (reads dropped
 unparsed because more than ``max_message_rate`` messages per second arrived: a token bucket holding one
 second of messages; the reads dropped are datagrams on UDP, stretches of the byte stream on TCP and serial).
-A flood costs at most the socket reads, so the senders keep their rate.
+A flood costs at most the socket reads, so the senders keep their rate. A TCP link the autopilot closes
+(``link_closed``) is opened again (pymavlink's ``autoreconnect``) every :data:`RECONNECT_WAIT` seconds; meanwhile
+the heartbeat watch reports the vehicle unhealthy. Failures of the link itself are counted too: ``send_error``
+(a write the socket refused), ``link_error`` (anything else the thread survived; logged with its traceback once).
 """
 
 from __future__ import annotations
 
 import logging
+import select
 import threading
 import time
 from collections import Counter
@@ -43,6 +47,7 @@ log = logging.getLogger("skymesh.mavlink")
 READ_SIZE = 4096  # bytes asked of a stream (TCP, serial) per read; a UDP read is one datagram
 READS_PER_PASS = 64  # reads before the thread turns to its senders (chosen here: a flood cannot starve them)
 IDLE_WAIT = 0.02  # s: the longest the thread sleeps in select() (chosen here)
+RECONNECT_WAIT = 0.5  # s between reconnection attempts of a TCP link the autopilot closed (chosen here)
 NOT_AUTOPILOTS = frozenset({mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_GIMBAL, mavlink.MAV_TYPE_ADSB,
                             mavlink.MAV_TYPE_ONBOARD_CONTROLLER})
 BAD_DATA_REASONS = (("Bad prefix", "garbage"), ("CRC", "crc"))
@@ -70,7 +75,7 @@ class MavlinkLink:
                  component_id: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER, max_message_rate: float = 2000.0):
         try:
             self.connection = mavutil.mavlink_connection(url, baud=baud, source_component=component_id,
-                                                         autoreconnect=False, retries=1)
+                                                         autoreconnect=True, retries=1)
         except Exception as error:  # socket, serial and pymavlink errors alike: nothing to fly
             raise LinkError(f"cannot open the MAVLink link {url!r}: {error}") from None
         self.url, self.on_message, self.component_id = url, on_message, component_id
@@ -123,13 +128,14 @@ class MavlinkLink:
                 self.rejected["link_error"] += 1
                 if self.rejected["link_error"] == 1:
                     log.exception("MAVLink link %s: unexpected error; it keeps running", self.url)
-                self._stop.wait(IDLE_WAIT)
+                self._stop.wait(RECONNECT_WAIT)
 
     def _pass(self) -> None:
         now = time.monotonic()
         due = min((p.due for p in self._periodic), default=now + IDLE_WAIT) if self.autopilot else now + IDLE_WAIT
-        if self.connection.select(max(0.0, min(due - now, IDLE_WAIT))):
-            self._read()
+        if self._readable(max(0.0, min(due - now, IDLE_WAIT))) and not self._read():
+            self.rejected["link_closed"] += 1  # readable, yet nothing: a TCP stream's end (pymavlink reconnects)
+            self._stop.wait(RECONNECT_WAIT)
         if self.autopilot is None:
             return
         now = time.monotonic()
@@ -138,21 +144,32 @@ class MavlinkLink:
                 periodic.due = max(periodic.due + periodic.period, now - periodic.period)
                 self.send(periodic.send)
 
-    def _read(self) -> None:
-        for _ in range(READS_PER_PASS):
+    def _readable(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` for input on the connection's socket or serial port (looked up every time:
+        pymavlink's TCP reconnection replaces the socket, and its ``select`` would watch the old one)."""
+        port = self.connection.port
+        if port is None:  # a TCP link between reconnection attempts: reading tries again
+            return True
+        readable, _, _ = select.select([port], [], [], timeout)
+        return bool(readable)
+
+    def _read(self) -> bool:
+        """Read what is there (at most :data:`READS_PER_PASS` reads); ``False`` if the first read got nothing."""
+        for reads in range(READS_PER_PASS):
             try:
                 data = self.connection.recv(READ_SIZE)
-            except OSError:
-                self.rejected["receive_error"] += 1
-                return
+            except OSError:  # reset by the autopilot (pymavlink has already reconnected a TCP link)
+                self.rejected["link_closed"] += 1
+                return True
             if not data:
-                return
+                return reads > 0
             if not self._admit():
                 self.rejected["flood"] += 1
                 continue
             for msg in self.connection.mav.parse_buffer(data) or ():
                 self._tokens -= 1
                 self._accept(msg)
+        return True
 
     def _admit(self) -> bool:
         """Token bucket: ``max_message_rate`` tokens a second, at most one second's worth held."""
