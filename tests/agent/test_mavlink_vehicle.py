@@ -115,6 +115,23 @@ def test_ardupilot_start_up_is_guided_arm_takeoff_and_streams_only_after_the_cli
         ardupilot.close()
 
 
+def test_a_vehicle_already_flying_is_not_armed_again_and_keeps_its_altitude():
+    airborne = ScriptedAutopilot(free_port(), start=(5.0, 5.0, -30.0))  # the agent restarts on a flying vehicle
+    airborne.armed, airborne.home = True, np.zeros(3)  # armed, 30 m above its home
+    try:
+        vehicle = connect(airborne)
+        try:
+            commands = {m.command for m in airborne.messages("COMMAND_LONG")}
+            assert mavlink.MAV_CMD_COMPONENT_ARM_DISARM not in commands and mavlink.MAV_CMD_DO_SET_MODE in commands
+            assert vehicle.healthy  # no climb to do: 30 m is above the 3 m take-off altitude
+            setpoint = airborne.messages("SET_POSITION_TARGET_LOCAL_NED")[-1]
+            assert [setpoint.x, setpoint.y, setpoint.z] == pytest.approx([5.0, 5.0, -30.0], abs=1e-3)
+        finally:
+            vehicle.close()
+    finally:
+        airborne.close()
+
+
 def test_a_denied_arm_command_is_a_clear_error(peer):
     peer.refuse[mavlink.MAV_CMD_COMPONENT_ARM_DISARM] = mavlink.MAV_RESULT_DENIED
     with pytest.raises(CommandRefused, match="MAV_CMD_COMPONENT_ARM_DISARM: refused by the autopilot "

@@ -195,11 +195,12 @@ class MavlinkVehicle:
         return self._frames[1]
 
     def begin_takeoff(self, stream_during_climb: bool) -> None:
-        """Climb to ``takeoff_altitude`` above home over the current position, then hold there until the agent
-        sends a setpoint; with ``stream_during_climb`` the climb point is streamed (PX4 takes off in OFFBOARD)."""
+        """Climb to ``takeoff_altitude`` above home over the current position (a vehicle already higher holds its
+        altitude), then hold there until the agent sends a setpoint; with ``stream_during_climb`` the climb point is
+        streamed (PX4 takes off in OFFBOARD)."""
         local, frames = self.telemetry.local, self.frames()
         home_z = self.telemetry.home[1][2] if self.telemetry.home is not None else local.position[2]
-        top = np.array([local.position[0], local.position[1], home_z - self.config.takeoff_altitude])
+        top = np.array([*local.position[:2], min(local.position[2], home_z - self.config.takeoff_altitude)])
         self._setpoint = Setpoint(frames.position_to_scenario(top))
         self._takeoff = (home_z - TAKEOFF_DONE * self.config.takeoff_altitude, stream_during_climb)
 
