@@ -49,7 +49,7 @@ def flying_vehicle(**params):
     try:
         vehicle = connect(peer, **params)
         try:
-            wait_for(lambda: vehicle.healthy)
+            wait_for(lambda: vehicle.healthy, timeout=15.0)  # the take-off is over
             yield peer, vehicle
         finally:
             vehicle.close()

@@ -11,13 +11,13 @@ import pymap3d
 import pytest
 
 from agent.vehicles import vehicle_from_config
-from agent.vehicles.base import Setpoint
+from agent.vehicles.base import Setpoint, orbit_vector_field
 from agent.vehicles.geodesy import ned_to_geodetic
 from agent.vehicles.mavlink import LinkError
 from agent.vehicles.mavlink.clock import BootClock
 from agent.vehicles.mavlink.config import MavlinkConfig
 from agent.vehicles.mavlink.frames import FrameMap
-from agent.vehicles.mavlink.guidance import SETTLE_TIME, setpoint_motion
+from agent.vehicles.mavlink.guidance import SETTLE_TIME, Reference
 from agent.vehicles.mavlink.vehicle import autopilot_kind
 from agent.vehicles.mavlink_protocol import mavlink
 from tests.agent.mavlink_peer import ORIGIN, SCENARIO_ORIGIN, free_port
@@ -124,21 +124,38 @@ def test_the_origin_derived_from_home_is_the_autopilot_origin():
     assert alt0 == pytest.approx(ORIGIN[2], abs=1e-4)
 
 
-def test_a_point_setpoint_feeds_forward_toward_it_and_fades_on_arrival():
-    position, velocity = setpoint_motion(Setpoint([30.0, 40.0, -20.0], speed=3.0), np.array([0.0, 0.0, -20.0]), 5.0)
-    assert position.tolist() == [30.0, 40.0, -20.0]
+def test_a_point_reference_moves_at_the_speed_limit_and_settles_on_the_point():
+    reference = Reference(cruise_speed=5.0)
+    goal = Setpoint([30.0, 40.0, -20.0], speed=3.0)
+    position, velocity = reference.advance(goal, np.array([0.0, 0.0, -20.0]), 0.0)  # starts at the vehicle
+    np.testing.assert_allclose(position, [0.0, 0.0, -20.0])
     np.testing.assert_allclose(velocity, [1.8, 2.4, 0.0])  # the speed limit, toward the point
-    _, near = setpoint_motion(Setpoint([1.0, 0.0, -20.0]), np.array([0.0, 0.0, -20.0]), 5.0)
-    np.testing.assert_allclose(near, [1.0 / SETTLE_TIME, 0.0, 0.0])
-    _, there = setpoint_motion(Setpoint([1.0, 0.0, -20.0]), np.array([1.0, 0.0, -20.0]), 5.0)
-    assert there.tolist() == [0.0, 0.0, 0.0]
+    position, _ = reference.advance(goal, position, 0.5)
+    np.testing.assert_allclose(position, [0.9, 1.2, -20.0])  # p += v dt
+    for _ in range(600):  # 60 s at 10 Hz, the vehicle on the reference
+        position, velocity = reference.advance(goal, position, 0.1)
+    np.testing.assert_allclose(position, goal.position, atol=1e-3)
+    assert np.linalg.norm(velocity) < 1e-3 / SETTLE_TIME * 1.01  # slowing down on arrival: d / SETTLE_TIME
 
 
-def test_an_orbit_setpoint_is_the_orbit_field_and_the_nearest_circle_point():
+def test_an_orbit_reference_flies_the_orbit_field_onto_the_circle():
+    reference = Reference(cruise_speed=4.0)
     setpoint = Setpoint([0.0, 0.0, -30.0], orbit=(np.array([10.0, 10.0]), 20.0, -1))
-    position, velocity = setpoint_motion(setpoint, np.array([10.0, 50.0, -25.0]), 4.0)  # 40 m east of the centre
-    np.testing.assert_allclose(position, [10.0, 30.0, -30.0])
-    assert np.linalg.norm(velocity) == pytest.approx(4.0) and velocity[2] == 0.0
-    on_circle, tangent = setpoint_motion(setpoint, np.array([10.0, 30.0, -30.0]), 4.0)
-    np.testing.assert_allclose(tangent, [4.0, 0.0, 0.0], atol=1e-12)  # anticlockwise from east: north
-    np.testing.assert_allclose(on_circle, [10.0, 30.0, -30.0])
+    position, velocity = reference.advance(setpoint, np.array([10.0, 50.0, -25.0]), 0.0)  # 40 m east of the centre
+    np.testing.assert_allclose(velocity[:2], orbit_vector_field(np.array([0.0, 40.0]), 20.0, -1, 4.0))
+    assert velocity[2] == pytest.approx(-4.0)  # toward the orbit's depth, 5 m up: 5 m / SETTLE_TIME, at most 4 m/s
+    for _ in range(1200):
+        position, velocity = reference.advance(setpoint, position, 0.1)
+    assert np.hypot(*(position[:2] - [10.0, 10.0])) == pytest.approx(20.0, abs=0.05)
+    assert position[2] == pytest.approx(-30.0, abs=1e-3) and np.linalg.norm(velocity[:2]) == pytest.approx(4.0)
+    radial = (position[:2] - [10.0, 10.0]) / 20.0
+    assert radial[0] * velocity[1] - radial[1] * velocity[0] < 0  # anticlockwise seen from above (direction -1)
+
+
+def test_the_reference_restarts_at_a_vehicle_that_could_not_follow():
+    reference = Reference(cruise_speed=5.0)
+    goal = Setpoint([100.0, 0.0, -20.0])
+    position, _ = reference.advance(goal, np.zeros(3), 0.0)
+    for _ in range(30):  # 3 s: the reference is 15 m ahead of a vehicle held at the start
+        position, _ = reference.advance(goal, np.zeros(3), 0.1)
+    assert reference.restarts == 1 and np.linalg.norm(position) < 10.1  # restarted at the vehicle, then 2 s on

@@ -11,7 +11,8 @@ the position known, and the vehicle armed, in OFFBOARD (PX4) or GUIDED (ArduPilo
   once the position or the autopilot's heartbeat is older than ``heartbeat_timeout`` — the agent does not sense
   with a stale pose;
 * :meth:`set_setpoint` replaces the setpoint that the link's thread streams as SET_POSITION_TARGET_LOCAL_NED
-  (position + velocity feed-forward, :mod:`agent.vehicles.mavlink.guidance`) at ``setpoint_rate_hz``;
+  at ``setpoint_rate_hz``: the position and velocity of a reference that flies the setpoint
+  (:mod:`agent.vehicles.mavlink.guidance`), which the autopilot tracks (velocity as feed-forward);
 * :meth:`step` does not wait: the real vehicle moves on its own clock. It watches the health (below) and
   counts the steps spent with a stale pose;
 * :attr:`healthy` is ``False``, with :attr:`health_reason`, when the autopilot's heartbeat or position is older
@@ -40,7 +41,7 @@ from agent.vehicles.mavlink.commands import Commander
 from agent.vehicles.mavlink.config import MavlinkConfig
 from agent.vehicles.mavlink.errors import LinkError
 from agent.vehicles.mavlink.frames import FrameMap
-from agent.vehicles.mavlink.guidance import setpoint_motion
+from agent.vehicles.mavlink.guidance import Reference
 from agent.vehicles.mavlink.link import MavlinkLink
 from agent.vehicles.mavlink.telemetry import GimbalAttitude, Telemetry
 from agent.vehicles.mavlink_protocol import mavlink, px4_modes
@@ -81,6 +82,8 @@ class MavlinkVehicle:
         self.autopilot = config.autopilot  # "px4" or "ardupilot" once the autopilot is heard
         self._frames: tuple[tuple, FrameMap] | None = None
         self._setpoint: Setpoint | None = None
+        self.reference = Reference(config.cruise_speed)  # what the stream sends (scenario frame)
+        self._streamed_at: float | None = None  # monotonic time of the last setpoint streamed
         self._takeoff: tuple[float, bool] | None = None  # (local z of the end of the climb, stream during it)
         self._mode: int | None = None  # the custom (main) mode the vehicle must stay in, once commanded
         self._timesyncs: dict[int, None] = {}  # ts1 of the TIMESYNC requests in flight
@@ -213,14 +216,17 @@ class MavlinkVehicle:
 
     # -- the link's periodic senders (on its thread) -------------------------------------------------------
     def _stream(self, mav) -> None:
-        """One SET_POSITION_TARGET_LOCAL_NED for the current setpoint (module docstring of guidance)."""
+        """One SET_POSITION_TARGET_LOCAL_NED: the setpoint's moving reference (:mod:`~agent.vehicles.mavlink.guidance`),
+        advanced by the time since the last one."""
         setpoint, local, frames = self._setpoint, self.telemetry.local, self.frames()
         if setpoint is None or local is None or frames is None:
             return
         if self._climbing() and not self._takeoff[1]:
             return
-        position, velocity = setpoint_motion(setpoint, frames.position_to_scenario(local.position),
-                                             self.config.cruise_speed)
+        now = time.monotonic()
+        dt = 0.0 if self._streamed_at is None else now - self._streamed_at
+        self._streamed_at = now
+        position, velocity = self.reference.advance(setpoint, frames.position_to_scenario(local.position), dt)
         x, y, z = frames.position_to_local(position)
         vx, vy, vz = frames.vector_to_local(velocity)
         mav.set_position_target_local_ned_send(self._boot_ms(), *self.commander.target, mavlink.MAV_FRAME_LOCAL_NED,
@@ -285,7 +291,7 @@ class MavlinkVehicle:
         return {"vehicle": {"kind": "mavlink", "healthy": self.healthy, "health_reason": self.health_reason,
                             "rejected_by_reason": dict(self.link.rejected), "setpoints_sent": self.setpoints_sent,
                             "commands_sent": 0 if self.commander is None else self.commander.sent,
-                            "stale_steps": self.stale_steps,
+                            "stale_steps": self.stale_steps, "reference_restarts": self.reference.restarts,
                             "clock": {"source": clock.source, "offset": clock.offset, "round_trip": clock.round_trip}}}
 
 
