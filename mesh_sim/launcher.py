@@ -181,7 +181,8 @@ class Launcher:
         self._spawn(f"autopilot{index}", "autopilot", [
             "-m", "mesh_sim.autopilot", "--instance", str(index), "--vehicle", str(vehicle.pop("kind")),
             *(f"--vehicle-param={key}={value}" for key, value in vehicle.items()),
-            "--north", repr(float(north)), "--east", repr(float(east)), "--origin", ",".join(map(repr, sc.origin)),
+            "--north", repr(float(north)), "--east", repr(float(east)), "--altitude", repr(float(sc.altitude)),
+            "--origin", ",".join(map(repr, sc.origin)),
             "--offboard-port", str(offboard), "--offboard-remote-port", str(listen), "--gcs-port", str(gcs),
             "--gcs-remote-port", str(gcs_remote), "--parent-pid", str(os.getpid()),
             "--stats", str(self.run_dir / f"autopilot-uav{index}.json"),
