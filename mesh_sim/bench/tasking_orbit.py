@@ -94,11 +94,12 @@ def _tracking_rows(
     speed: float = 0.0,
     eif: bool = False,
 ) -> list[dict]:
-    """RMSE and steady-state time over the runs that kept the target (final centre error below ``r``); the runs
-    that lost it (the team ends up blind and searching) are counted apart, since one of them would dominate
-    any mean (the paper reports none). With ``eif``, the rows of skymesh's EIF on the same bearings follow."""
+    """RMSE and steady-state time over the runs that kept the target (:func:`mesh_sim.orbit_experiments.kept_runs`:
+    every centre within ``r`` of it over the steady-state window); the runs that lost it are counted apart, since
+    one of them would dominate any mean (the paper reports none). With ``eif``, the rows of skymesh's EIF on the
+    same bearings follow."""
     result = oe.run_tracking(config, target, runs, seed, speed)
-    kept = np.linalg.norm(result.centre_error[:, -1], axis=-1).max(axis=-1) < config.radius
+    kept = oe.kept_runs(result, config.radius)
     row = _row_of(experiment, algorithm, config, runs, speed, result, kept)
     if not eif:
         return [row]
