@@ -57,12 +57,14 @@ averages back, which cancel), ``P0 = diag(5 m, 5 m,
 
 **Targets** (spec 004 §4): static; the closed-form figure-8 ``p(t) = d [sin(4πωt), sin(2πωt)]``, ``d = 20 m``,
 ``ω = 0.0285 Hz``; constant velocity ``[v, v]``; Singer "man-like" with exact discretisation
-(:class:`mesh_sim.targets.SingerTarget`). Truth for every step is computed before the run.
+(:func:`mesh_sim.orbit_targets.man_like_paths`: α̃ = 10², x(0) = [0, 0, 1, 1, 1, 1], σ_w = 0.1). Truth for
+every step is computed before the run.
 
 **Experiments**: E1 RMSE vs ``n`` on the figure-8, static vs dynamic (dt = 0.05 s, C_r = 60 m, initial centre
 18 m from the target, RMSE over t > 20 s, steady-state time); E2 constant-velocity target, ``n = 5``,
 v = 0..8 m/s; E3 rendezvous on a static target (dt = 1 s, r = 15 m, R_max = 30 m, C_r = 30 m, random patrol in
-200 x 200 m): each UAV's distance to the target circle ``|‖ξ_i - p‖ - r|``.
+200 x 200 m): each UAV's distance to the target circle ``|‖ξ_i - p‖ - r|``; E4 the same with the man-like target
+(:func:`run_rendezvous` with ``target="singer"``).
 
 **Metrics** (004 §6.1.1: "The performance index is the average steady-state estimation uncertainty, i.e., the
 steady state Root Mean Squared Error (RMSE). This is obtained by averaging the results of 50 different
@@ -93,7 +95,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mesh_sim.targets import ConstantVelocityTarget, Figure8Target, SingerTarget, StaticTarget
+from mesh_sim.orbit_targets import man_like_paths
+from mesh_sim.targets import ConstantVelocityTarget, Figure8Target, StaticTarget
 from tasking.centre_measure import (
     ETA_MAX,
     bearing,
@@ -207,25 +210,8 @@ class SimResult:
 # ----------------------------------------------------------------------------------------- targets
 def target_paths(kind: str, runs: int, times: np.ndarray, speed: float = 0.0, seed: int = 0) -> np.ndarray:
     """Ground truth ``(R, T, 2)`` at ``times`` for ``kind`` in static / figure8 / cv / singer (spec 004 §4)."""
-    if kind == "singer":
-        dt = float(times[1] - times[0])
-        paths = []
-        for run in range(runs):
-            # 004 §4.4 with α̃ = 10² (the "man-like" reading), x(0) = [0, 0, 1, 1, 1, 1], σ(w) = 0.1 m/s³ as a white
-            # jerk-noise density: RMS acceleration σ_w / sqrt(2 α̃)
-            alpha = 100.0
-            target = SingerTarget(
-                (0.0, 0.0),
-                (1.0, 1.0),
-                alpha,
-                0.1 / math.sqrt(2 * alpha),
-                seed=seed * 1000 + run,
-                dt=dt,
-                acceleration=(1.0, 1.0),
-                max_speed=math.inf,
-            )
-            paths.append(target.grid(float(times[-1]))[1][: len(times)])
-        return np.stack(paths)
+    if kind == "singer":  # 004 §4.4 (Eqs. (16)-(17)), exactly discretised: mesh_sim.orbit_targets
+        return man_like_paths(runs, times, seed)
     models = {
         "static": lambda: StaticTarget((0.0, 0.0)),
         "figure8": lambda: Figure8Target((0.0, 0.0)),
@@ -394,7 +380,8 @@ def rendezvous_config(**changes) -> OrbitConfig:
 
 
 def run_rendezvous(config: OrbitConfig, runs: int, seed: int, target: str = "static") -> SimResult:
-    """E3: UAVs deployed uniformly in the 200 x 200 m area, all searching; the target at the origin."""
+    """E3 (``target="static"``) and E4 (``"singer"``, the man-like target): UAVs deployed uniformly in the
+    200 x 200 m area, all searching; the target starts at the origin."""
     rng = np.random.default_rng(seed)
     times = np.arange(config.steps) * config.dt
     paths = target_paths(target, runs, times, 0.0, seed)

@@ -14,7 +14,7 @@ pytestmark = pytest.mark.slow  # benchmark run
 def test_quick_run_is_well_formed(printed):
     result = tasking_orbit.run(quick=True, repeats=1)
     assert result["benchmark"] == tasking_orbit.NAME
-    assert {r["experiment"] for r in result["rows"]} == {"E1", "E2", "E3"}
+    assert {r["experiment"] for r in result["rows"]} == {"E1", "E2", "E3", "E4"}
     for row in result["rows"]:
         for key, value in row.items():
             if isinstance(value, float) and key not in (

@@ -76,6 +76,9 @@ def test_target_paths():
     np.testing.assert_allclose(oe.target_paths("cv", 1, times, speed=3.0)[0], np.outer(times, [3.0, 3.0]))
     singer = oe.target_paths("singer", 2, times, seed=1)
     assert singer.shape == (2, times.size, 2) and not np.allclose(singer[0], singer[1])
+    walk = oe.target_paths("singer", 8, np.arange(0.0, 101.0, 1.0), seed=1)  # E4's 1 s step, α̃ Δt = 100
+    speed = np.linalg.norm(walk[:, -1] - walk[:, 0], axis=-1) / 100.0
+    assert speed.mean() == pytest.approx(math.sqrt(2) * 1.01, rel=0.05)  # not the 2.1 m/s of a trapezoidal step
     with pytest.raises(ValueError, match="kind"):
         oe.target_paths("zigzag", 1, times)  # unknown target model
 
@@ -179,3 +182,20 @@ def test_one_collinear_seer_traps_a_team_of_three_behind_the_fov_limit():
     assert _final_errors(trapped).min() > 15.0  # still ~18 m off after 20 s (400 steps)
     free = _singular_start(oe.replace(config, eta_max=math.pi), runs=3, seed=9)
     assert _final_errors(free).max() < 1.0
+
+
+def test_rendezvous_with_the_man_like_target_converges_up_to_the_one_step_lag():
+    """E4 (004 §5.4, Fig. 6: "all distances converge to zero"): every UAV finds and orbits the walking target
+    (≈ 1.4 m/s); at Δt = 1 s the centres trail it by the one-step lag ``|v| Δt`` (dynamic, 004 §2.7 step 5) or
+    ``2/Λ`` times that (static, e ← (1 - Λ/2) e - v Δt), so the distances to the target circle settle there."""
+    static, dynamic = (
+        oe.run_rendezvous(oe.rendezvous_config(duration=300.0, dynamic=d), runs=2, seed=4, target="singer")
+        for d in (False, True)
+    )
+    lag = np.mean(np.linalg.norm(np.diff(dynamic.bearings.target, axis=1), axis=-1))  # |v| Δt
+    assert lag == pytest.approx(1.43, rel=0.1)
+    for result in (static, dynamic):
+        assert np.all(result.stage[:, -1] != Stage.SEARCH)
+    far, near = oe.final_circle_distances(static), oe.final_circle_distances(dynamic)
+    assert near.max() < lag < far.min()  # the lag projected on the radius is below |v| Δt
+    assert far.mean() / near.mean() == pytest.approx(2 / oe.OrbitConfig().Lambda, rel=0.25)
