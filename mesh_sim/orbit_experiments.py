@@ -9,7 +9,11 @@ centre, sees the target in the triangular FOV ``|η| <= η_max = 30°``, range `
 Gaussian noise (σ = 1°), the axis heading comes from the magnetometer (σ = 0.5° in 6.2; 0 in 6.1, where the
 paper's 1° "also comprises the magnetometer uncertainty") and positions from GPS (σ = 2 cm). A searching UAV
 points its camera along its direction of flight and takes the point ``r`` ahead as its provisional centre.
-Communication is the disk graph ``‖ξ_i - ξ_j‖ < C_r`` in synchronous rounds without loss (spec 004 §6).
+Communication is the disk graph ``‖ξ_i - ξ_j‖ < C_r`` in synchronous rounds without loss (spec 004 §6), or, with
+``message_loss = p``, each directed message of an estimation round (the three rounds below) lost independently
+with probability ``p``: a receiver keeps a lost neighbour's Metropolis weight on itself
+(:func:`tasking.consensus.lossy_weights`, which says why) and the KCF sums what it received. The rendezvous
+telling and the spacing law's neighbour phases keep the disk graph (their loss is not modelled).
 
 **One step** (spec 004 §2.7; three rounds = the paper's 3 messages per UAV per step):
 
@@ -112,6 +116,7 @@ from tasking.consensus import (
     DoubleIntegrator,
     consensus_round,
     kcf_step,
+    lossy_weights,
     metropolis_weights,
     wls_estimate,
     wls_information,
@@ -120,6 +125,7 @@ from tasking.rendezvous import Stage, StageRules, StageState, next_stage
 
 PATROL_AREA = (-100.0, 100.0, -100.0, 100.0)  # 004 §2.9: 200 x 200 m, target at the centre
 STEADY_STATE_FROM = 20.0  # 004 §5.1: RMSE over t > 20 s
+ROUNDS = 3  # 004 §6.1.1: "each UAV sends 3 messages" per step (rounds 1-3 of the module docstring)
 
 
 @dataclass(frozen=True)
@@ -151,10 +157,13 @@ class OrbitConfig:
     k_theta: float = K_THETA
     max_speed: float = MAX_SPEED
     initial_offset: float = 18.0  # 004 §6.1.1: initial centre 18 m from the target
+    message_loss: float = 0.0  # Bernoulli loss of each directed estimation message (004 §6: none; module docstring)
 
     def __post_init__(self):
         if isinstance(self.n, bool) or int(self.n) != self.n or self.n < 1:
             raise ValueError(f"n must be a positive number of UAVs, got {self.n}")
+        if not 0 <= self.message_loss < 1:
+            raise ValueError(f"message_loss must be a probability in [0, 1), got {self.message_loss}")
         for name in ("dt", "duration", "radius", "comm_range", "max_speed"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -259,6 +268,7 @@ def simulate(
         # --- communication graph and camera
         adjacency = (np.linalg.norm(xi[:, :, None] - xi[:, None, :], axis=-1) < c.comm_range) & ~eye
         W = metropolis_weights(adjacency)
+        heard = _delivered(adjacency, c.message_loss, max(c.wls_iterations, ROUNDS), rng)  # one mask per round
         flight = _unit(waypoint - xi)
         look_at = np.where(orbiting[..., None], centre, xi + c.radius * flight)  # the (provisional) centre
         axis = heading(look_at - xi)
@@ -275,11 +285,11 @@ def simulate(
         sensors[:, k], azimuth[:, k], seen[:, k] = gps, wrap_angle(axis_measured + eta_measured), sees
         # --- 2. consensus WLS rounds
         P, q = wls_information(m, np.eye(2), sees)
-        for _ in range(c.wls_iterations):
-            P, q = consensus_round(W, P, q)
+        for round_heard in heard[: c.wls_iterations]:
+            P, q = consensus_round(lossy_weights(W, round_heard), P, q)
         static_estimate, informed = wls_estimate(P, q, look_at)
         if c.dynamic:  # the KCF's measure: one round on the reflected measures, sent with m_i in round 1
-            P1, q1 = consensus_round(W, *wls_information(reflected, np.eye(2), sees))
+            P1, q1 = consensus_round(lossy_weights(W, heard[0]), *wls_information(reflected, np.eye(2), sees))
             one_step, informed_one = wls_estimate(P1, q1, look_at)
         # --- rendezvous: who hears an orbiting UAV that has target information, and the circle it is told
         orbit_links = adjacency & (orbiting & informed)[:, None, :]
@@ -302,14 +312,14 @@ def simulate(
                 model,
                 kcf_mean,
                 kcf_cov,
-                adjacency & tracking[:, :, None] & tracking[:, None, :],
+                heard[1] & tracking[:, :, None] & tracking[:, None, :],
                 one_step,
                 informed_one & tracking,
                 R_kcf,
                 c.epsilon,
             )
             info = np.where(tracking[..., None, None], np.linalg.inv(kcf.cov), 0.0)
-            P4, q4 = consensus_round(W, info, (info @ kcf.mean[..., None])[..., 0])
+            P4, q4 = consensus_round(lossy_weights(W, heard[2]), info, (info @ kcf.mean[..., None])[..., 0])
             x_ml, _ = wls_estimate(P4, q4, kcf.mean)
             new_centre = np.where(tracking[..., None], x_ml[..., :2], new_centre)  # [p̂_i(t+1); ṗ̂_i(t+1)] = x̂_{i,ML}(t)
             velocity = np.where(tracking[..., None], x_ml[..., 2:], velocity)
@@ -331,6 +341,14 @@ def simulate(
         xi = xi + c.dt * cap_speed((goal - xi) / c.dt, c.max_speed)
     log = BearingLog(sensors, azimuth, seen, math.hypot(c.sigma_bearing, c.sigma_yaw), paths.copy())
     return SimResult(np.arange(steps) * c.dt, errors, circle, stages, log)
+
+
+def _delivered(adjacency: np.ndarray, loss: float, rounds: int, rng: np.random.Generator) -> np.ndarray:
+    """``(rounds, R, n, n)``: whether ``i`` receives ``j``'s message in each round of a step, each directed message
+    lost independently with probability ``loss`` (the RNG is not drawn when nothing is lost)."""
+    if loss == 0:
+        return np.broadcast_to(adjacency, (rounds, *adjacency.shape))
+    return adjacency & (rng.random((rounds, *adjacency.shape)) >= loss)
 
 
 def _slope(history: np.ndarray, dt: float) -> np.ndarray:
