@@ -268,7 +268,7 @@ def simulate(
         # --- communication graph and camera
         adjacency = (np.linalg.norm(xi[:, :, None] - xi[:, None, :], axis=-1) < c.comm_range) & ~eye
         W = metropolis_weights(adjacency)
-        heard = _delivered(adjacency, c.message_loss, max(c.wls_iterations, ROUNDS), rng)  # one mask per round
+        heard, weights = _rounds(W, adjacency, c.message_loss, max(c.wls_iterations, ROUNDS), rng)
         flight = _unit(waypoint - xi)
         look_at = np.where(orbiting[..., None], centre, xi + c.radius * flight)  # the (provisional) centre
         axis = heading(look_at - xi)
@@ -285,11 +285,11 @@ def simulate(
         sensors[:, k], azimuth[:, k], seen[:, k] = gps, wrap_angle(axis_measured + eta_measured), sees
         # --- 2. consensus WLS rounds
         P, q = wls_information(m, np.eye(2), sees)
-        for round_heard in heard[: c.wls_iterations]:
-            P, q = consensus_round(lossy_weights(W, round_heard), P, q)
+        for round_weights in weights[: c.wls_iterations]:
+            P, q = consensus_round(round_weights, P, q)
         static_estimate, informed = wls_estimate(P, q, look_at)
         if c.dynamic:  # the KCF's measure: one round on the reflected measures, sent with m_i in round 1
-            P1, q1 = consensus_round(lossy_weights(W, heard[0]), *wls_information(reflected, np.eye(2), sees))
+            P1, q1 = consensus_round(weights[0], *wls_information(reflected, np.eye(2), sees))
             one_step, informed_one = wls_estimate(P1, q1, look_at)
         # --- rendezvous: who hears an orbiting UAV that has target information, and the circle it is told
         orbit_links = adjacency & (orbiting & informed)[:, None, :]
@@ -319,7 +319,7 @@ def simulate(
                 c.epsilon,
             )
             info = np.where(tracking[..., None, None], np.linalg.inv(kcf.cov), 0.0)
-            P4, q4 = consensus_round(lossy_weights(W, heard[2]), info, (info @ kcf.mean[..., None])[..., 0])
+            P4, q4 = consensus_round(weights[2], info, (info @ kcf.mean[..., None])[..., 0])
             x_ml, _ = wls_estimate(P4, q4, kcf.mean)
             new_centre = np.where(tracking[..., None], x_ml[..., :2], new_centre)  # [p̂_i(t+1); ṗ̂_i(t+1)] = x̂_{i,ML}(t)
             velocity = np.where(tracking[..., None], x_ml[..., 2:], velocity)
@@ -343,12 +343,14 @@ def simulate(
     return SimResult(np.arange(steps) * c.dt, errors, circle, stages, log)
 
 
-def _delivered(adjacency: np.ndarray, loss: float, rounds: int, rng: np.random.Generator) -> np.ndarray:
-    """``(rounds, R, n, n)``: whether ``i`` receives ``j``'s message in each round of a step, each directed message
-    lost independently with probability ``loss`` (the RNG is not drawn when nothing is lost)."""
+def _rounds(W: np.ndarray, adjacency: np.ndarray, loss: float, rounds: int, rng: np.random.Generator):
+    """Per round of a step, who received whose message ``(R, n, n)`` and the weights that round averages with: each
+    directed message lost independently with probability ``loss`` (:func:`tasking.consensus.lossy_weights`);
+    without loss, the disk graph and ``W`` (the RNG is not drawn)."""
     if loss == 0:
-        return np.broadcast_to(adjacency, (rounds, *adjacency.shape))
-    return adjacency & (rng.random((rounds, *adjacency.shape)) >= loss)
+        return [adjacency] * rounds, [W] * rounds
+    heard = list(adjacency & (rng.random((rounds, *adjacency.shape)) >= loss))
+    return heard, [lossy_weights(W, round_heard) for round_heard in heard]
 
 
 def _slope(history: np.ndarray, dt: float) -> np.ndarray:
