@@ -48,10 +48,12 @@ visibility) is kept in :class:`BearingLog`, so another estimator can run on the 
 iterations the difference ... is negligible"; 3 is its message budget in Sec. 6).
 
 **Parameters the paper does not give** (chosen here; :class:`OrbitConfig`): ``κ = 6`` (the paper's κ > 5)
-and ``Λ = 1`` — the saturation binds and every ``m_i`` lands on its line of sight. In 6.1, ``r = 30 m``: for
-equally spaced UAVs and exact consensus the static error obeys ``e ← (1 - Λ/2) e + noise``, whose stationary
-RMSE is ``r σ_η sqrt(Λ / (n (1 - Λ/4)))`` = 0.27 m at n = 5 — the paper's own static figure at v = 0, so
-``r`` is calibrated on that one number and every other figure is a prediction; ``R_max = ∞`` in 6.1 (not
+and ``Λ = 1`` — the saturation binds and every ``m_i`` lands on its line of sight. In 6.1, ``r = 30 m``: 6.2
+gives ``r = 15 m`` with ``C_r = 30 m`` (two UAVs anywhere on one circle hear each other), and the same
+``r = C_r / 2`` with 6.1's 60 m is 30 m. For equally spaced UAVs and exact consensus the static error obeys
+``e ← (1 - Λ/2) e + noise``, whose stationary RMSE is ``r σ_η sqrt(Λ / (n (1 - Λ/4)))``; with ``r = 30 m`` the
+paper's own static figure at v = 0 (0.27 m at n = 5) gives ``Λ = 0.998``, so ``(r, Λ)`` rest on that one number
+and on ``C_r``, and every other figure is a prediction; ``R_max = ∞`` in 6.1 (not
 given; with the 30° FOV the 18 m initial offset is then visible from the far side of the circle). KCF:
 ``R = (sqrt(2) r σ)² I`` with ``σ² = σ_η² + σ_ψ²`` (0.74 m at r = 30 m: a reflected measure's noise ``2 r σ`` along
 ``l_⊥``, halved in variance over two axes; the one-step WLS averages ~n measures and ``S_i`` adds ~n such
@@ -137,9 +139,9 @@ class OrbitConfig:
     dt: float = 0.05
     duration: float = 60.0
     dynamic: bool = False  # False: static algorithm only; True: approaching then tracking stage
-    radius: float = 30.0  # chosen here (6.1 does not give it): see the module docstring
+    radius: float = 30.0  # chosen here (6.1 does not give it): C_r / 2, as in 6.2 (module docstring)
     kappa: float = 6.0  # chosen here: κ > 5 (004 §2.6)
-    Lambda: float = 1.0  # chosen here: 0 < Λ < 2
+    Lambda: float = 1.0  # chosen here, 0 < Λ < 2: from the paper's 0.27 m static figure (module docstring)
     eta_max: float = ETA_MAX
     range_max: float = math.inf  # chosen here for 6.1 (not given there): no range limit
     comm_range: float = 60.0

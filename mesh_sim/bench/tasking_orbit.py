@@ -30,12 +30,14 @@ spec 004 §5) reproduced with :mod:`mesh_sim.orbit_experiments`, side by side wi
   and, on the static target, the mean error in standard errors (goal, full mode: below 3, "even the intermediate
   estimates ... are unbiased", 004 §3.2).
 
-Choices (the paper does not give them; see :mod:`mesh_sim.orbit_experiments` for the rest): κ = 6, Λ = 1, r = 30 m and
-R_max = ∞ in 6.1 (r calibrated on E2's static v = 0 figure through the closed form, so that goal is a consistency check,
-not a prediction), KCF R = (√2 r σ_η)² I (the reflected measure's noise), P0 = diag(5, 5 m, 8, 8 m/s)², ε = 0.5. In E1
+Choices (the paper does not give them; see :mod:`mesh_sim.orbit_experiments` for the rest): κ = 6, r = 30 m in 6.1
+(``C_r / 2``, as 6.2's 15 m with 30 m), Λ = 1 (from E2's static v = 0 figure through the closed form, so that goal is a
+consistency check, not a prediction), R_max = ∞ in 6.1, KCF R = (√2 r σ_η)² I (the reflected measure's noise),
+P0 = diag(5, 5 m, 8, 8 m/s)², ε = 0.5. In E1
 the dynamic algorithm uses σ_a = 2 m/s² (Bar-Shalom's rule of thumb, 0.5-1 times the 8's peak acceleration of 2.56
-m/s²): with the paper's σ_a = 0.01 m/s² a constant-velocity filter cannot follow the figure-8, which one extra row
-shows; E2 (a truly constant velocity) keeps the paper's 0.01 m/s². "≈" in the goals means within ±30 % (chosen here).
+m/s²): with the paper's σ_a = 0.01 m/s² a constant-velocity filter cannot follow the figure-8 (one extra row:
+every run loses it, full mode); E2 (a truly constant velocity) keeps the paper's 0.01 m/s². "≈" in the goals means
+within ±30 % (chosen here).
 Quick mode: 2 runs, n ∈ {3, 12}, v ∈ {0, 8}, shorter E2-E4 runs; full: 50 runs per configuration.
 
 **skymesh's estimator on the same bearings** (:mod:`mesh_sim.orbit_eif`): in every E1/E2 dynamic run, every UAV's
@@ -347,7 +349,7 @@ def _goals(rows: list[dict], mode: dict) -> list[dict]:
     goals.append(_goal("E1/E2: no run loses the target (paper: none reported)", "0 lost runs", lost or 0, not lost))
     for (algorithm, v), paper in PAPER_E2.items():
         measured = _row(rows, "E2", algorithm, v=v)["rmse_m"]
-        note = " (r calibrated on it)" if (algorithm, v) == ("static", 0.0) else ""
+        note = " (Λ calibrated on it)" if (algorithm, v) == ("static", 0.0) else ""
         goals.append(
             _goal(
                 f"E2 {algorithm} RMSE at v = {v:g} m/s{note}",
