@@ -78,21 +78,21 @@ simulations"): each run's RMSE, averaged over the runs (:func:`steady_rmse`, :fu
 time is read on that averaged curve (:func:`steady_state_time`); a run whose error exceeds ``r`` in the
 steady-state window lost the target and is counted apart (:func:`kept_runs`).
 
-**Why E1 misses "less than 4 s for n = 3"** (measured; no parameter was changed for it). ``r = 30 m`` and the
-18 m offset leave 37.5 % of the initial circle blind (``|η| > 30°`` between the phases where
-``sin η = 18 / 30`` nears its 36.9° peak). In a few per cent of random starts exactly one UAV sees the target, nearly
-on its axis, from the far side, and the other two sit in the blind arcs. That UAV's measure moves the centre across
-its line of sight only (Eq. (2): ``m_i = p̂_i`` when the target is on the axis); as it turns, the centre stays on
-its line of sight and the whole formation turns rigidly about the target, the other two UAVs staying blind. This is
-the singular configuration of 004's Corollary 1, "``η_1(t) = 0`` from different locations on the circle", which
-the paper says "at least 3 different measures per revolution" avoid. At dt = 0.05 s they do not: a step turns the
-line of sight by ``α ≈ ω_0 Δt r / (r + e)`` (0.006 rad), the error decays by ``cos α`` per step, and the 1° bearing
-noise (0.8 m at 48 m) grows it faster (a static target stays 18-23 m off for 20 s; the test
+**Why E1 misses "less than 4 s for n = 3"** (measured; no parameter was changed for it). ``r = 30 m`` and the 18 m
+offset leave 37.5 % of the initial circle blind (``|η| > 30°`` between the phases where ``sin η = 18 / 30`` nears
+its 36.9° peak). In a few per cent of random starts exactly one UAV sees the target, nearly on its axis (``η ≈ 0``,
+e.g. from the far side), and the other two sit in the blind arcs. That UAV's measure moves the centre across its
+line of sight only (Eq. (2): ``m_i = p̂_i`` when the target is on the axis); as it turns, the centre stays on its
+line of sight and the whole formation turns rigidly about the target, the other two UAVs staying blind. This is the
+singular configuration of 004's Corollary 1, "``η_1(t) = 0`` from different locations on the circle", which the
+paper says "at least 3 different measures per revolution" avoid. At dt = 0.05 s they do not: a step turns the line
+of sight by ``α ≈ ω_0 Δt r / (r + e)`` (0.006 rad), the error decays by ``cos α`` per step, and the 1° bearing noise
+(0.8 m at 48 m) grows it faster (a static target stays 18-23 m off for 20 s; the test
 ``test_one_collinear_seer_traps_a_team_of_three_behind_the_fov_limit``). Without the FOV limit (Theorem 1's
-assumption) the same start converges in under a second. With ``n = 4`` equal spacing puts the fourth UAV on
-the same line (measured, 50 runs: 8.5 s static, 10.3 s dynamic; the paper states no bound for n = 4); from
-``n = 5`` on some UAV sees the target from another direction (1.7 s / 1.05 s at n = 5). The figure-8 (8 m/s at
-``t = 0``) either frees such a run after seconds or escapes it for good (2 of 50 runs at n = 3).
+assumption) the same start converges in under a second. With ``n = 4`` equal spacing puts the fourth UAV on the same
+line (measured, 50 runs: 8.5 s static, 10.3 s dynamic; the paper states no bound for n = 4); from ``n = 5`` on some
+UAV sees the target from another direction (1.7 s / 1.05 s at n = 5). The figure-8 (8 m/s at ``t = 0``) either frees
+such a run after seconds or escapes it for good (2 of 50 runs at n = 3).
 """
 
 from __future__ import annotations
