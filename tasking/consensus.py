@@ -18,6 +18,22 @@ centralized WLS ``(Σ A_iᵀΣ_i⁻¹A_i)⁻¹ Σ A_iᵀΣ_i⁻¹y_i``; an inter
 the measurements, hence unbiased. In Andreetto et al. ``A_i = I_2`` and ``y_i = m_i`` (Eq. (2)); the static
 algorithm runs ``f`` iterations per step, the tracking stage one (spec 004 §2.7 steps 2 and 4).
 
+**Lost messages** (not in the paper, which assumes none, spec 004 §6; chosen here). In a round in which node ``i``
+did not receive ``j``'s message, ``i`` keeps ``W_ij`` on itself (:func:`lossy_weights`):
+
+    ``W'_ij = W_ij`` if ``i`` received ``j``'s message, else 0;  ``W'_ii = 1 - Σ_{j≠i} W'_ij``.
+
+The receiver alone decides, from what it heard: no acknowledgement, so still one message per node and round (the
+paper's budget of 3 per step). ``W'`` is non-negative and row-stochastic but, unlike ``W``, not symmetric: every
+``(P_i, q_i)`` stays ``Σ_j c_ij (P_j(0), q_j(0))`` with one set of coefficients ``c_ij >= 0`` (products of the
+rounds' ``W'``), so ``x̂_i`` is still a WLS of the measurements with weights ``c_ij Σ_j⁻¹`` — unbiased, the paper's
+"even the intermediate estimates ... are unbiased" — and a node that hears nobody keeps its own information (the
+"number of UAVs that contributes to the estimate changes in time"). What is lost is the conservation of
+``Σ_i P_i``: the limit is a consensus on a weighted WLS rather than on the centralized one, and the variance is
+somewhat higher. The alternative, dropping a link for both ends when either direction is lost, keeps ``W``
+doubly stochastic but needs each sender to learn whether its message arrived (an acknowledgement round).
+The Kalman-consensus filter sums what node ``i`` received (``received`` in place of the undirected ``N_i``).
+
 **Kalman-consensus filter** (Olfati-Saber, CDC 2009, Algorithm 1, as spec 004 §2.6 transcribes it): node ``i``
 with prior ``(x̄_i, P_i)`` and measurement ``z_i = H x + v_i``, ``v_i ~ N(0, R)``:
 
@@ -51,8 +67,9 @@ SIGMA_A = 0.01
 
 
 # -------------------------------------------------------------------------------------------- graphs
-def check_adjacency(adjacency) -> np.ndarray:
-    """``adjacency (..., n, n)`` as a boolean array; ValueError unless symmetric with an empty diagonal."""
+def check_adjacency(adjacency, symmetric: bool = True) -> np.ndarray:
+    """``adjacency (..., n, n)`` as a boolean array; ValueError unless it has an empty diagonal and, with
+    ``symmetric``, is symmetric (``symmetric=False``: ``adjacency[i, j]`` says node ``i`` received ``j``'s message)."""
     adj = np.asarray(adjacency)
     if adj.ndim < 2 or adj.shape[-1] != adj.shape[-2]:
         raise ValueError(f"adjacency must be (..., n, n), got shape {adj.shape}")
@@ -60,7 +77,7 @@ def check_adjacency(adjacency) -> np.ndarray:
         if not np.all(np.isin(adj, (0, 1))):
             raise ValueError("adjacency must hold only 0/1 (or booleans)")
         adj = adj.astype(bool)
-    if np.any(adj != np.swapaxes(adj, -1, -2)):
+    if symmetric and np.any(adj != np.swapaxes(adj, -1, -2)):
         raise ValueError("adjacency must be symmetric (the communication graph is undirected)")
     if np.any(np.diagonal(adj, axis1=-2, axis2=-1)):
         raise ValueError("adjacency must have an empty diagonal (no self-loops)")
@@ -86,6 +103,19 @@ def metropolis_weights(adjacency) -> np.ndarray:
     n = adj.shape[-1]
     W[..., np.arange(n), np.arange(n)] = 1.0 - W.sum(axis=-1)  # W_ii = 1 - Σ_j W_ij
     return W
+
+
+def lossy_weights(weights, received) -> np.ndarray:
+    """One round's weights when messages were lost (module docstring): ``W'_ij = W_ij`` where node ``i`` received
+    ``j``'s message (``received[..., i, j]``), 0 elsewhere off the diagonal, and ``W'_ii = 1 - Σ_{j≠i} W'_ij``."""
+    W = np.asarray(weights, dtype=float)
+    heard = check_adjacency(received, symmetric=False)
+    if heard.shape != W.shape:
+        raise ValueError(f"received must have the weights' shape {W.shape}, got {heard.shape}")
+    kept = np.where(heard, W, 0.0)
+    n = W.shape[-1]
+    kept[..., np.arange(n), np.arange(n)] = 1.0 - kept.sum(axis=-1)  # the lost weight stays on the receiver
+    return kept
 
 
 def check_weights(weights, require_connected: bool = False) -> np.ndarray:
@@ -211,14 +241,15 @@ def kcf_step(
     """One step of the Kalman-consensus filter (Olfati-Saber 2009, Algorithm 1) at every node.
 
     ``prior_mean (..., n, 4)``, ``prior_cov (..., n, 4, 4)``, ``adjacency (..., n, n)`` (the nodes that run the
-    filter and exchange ``(u_i, U_i, x̄_i)``; one message per node), ``z (..., n, 2)`` with ``has_z (..., n)``,
+    filter and exchange ``(u_i, U_i, x̄_i)``; one message per node; ``adjacency[..., i, j]``: ``i`` received ``j``'s
+    message, which need not be symmetric when messages are lost), ``z (..., n, 2)`` with ``has_z (..., n)``,
     ``R`` the (2, 2) measurement covariance, ``epsilon`` the consensus gain ``ε >= 0``."""
     if not (math.isfinite(epsilon) and epsilon >= 0):
         raise ValueError(f"epsilon must be a non-negative consensus gain, got {epsilon}")
     R = np.asarray(R, dtype=float)
     if R.shape != (2, 2) or not np.all(np.isfinite(R)) or np.any(np.linalg.eigvalsh(0.5 * (R + R.T)) <= 0):
         raise ValueError(f"R must be a (2, 2) positive-definite covariance, got {R.tolist()}")
-    adj = check_adjacency(adjacency).astype(float)
+    adj = check_adjacency(adjacency, symmetric=False).astype(float)
     x_bar, P = np.asarray(prior_mean, dtype=float), np.asarray(prior_cov, dtype=float)
     mask = np.asarray(has_z, dtype=bool)
     z = np.where(mask[..., None], np.asarray(z, dtype=float), 0.0)

@@ -4,18 +4,41 @@ spec 004 §5) reproduced with :mod:`mesh_sim.orbit_experiments`, side by side wi
 * **E1** (004 §5.1, Fig. 4): figure-8 target, RMSE over t > 20 s vs ``n`` for the static and the dynamic
   algorithm; the steady-state time for n = 3 (paper: < 4 s) and n = 12 (paper: < 1 s); the paper's "the same
   precision achieved using 12 drones for the static algorithm is attained with only 5 drones" with the DKF.
+  RMSE and the steady-state curve as the paper averages them ("averaging the results of 50 different
+  simulations": each run's RMSE, then the mean). Known misses, measured causes
+  (:mod:`mesh_sim.orbit_experiments`): n = 3, a few runs start in Corollary 1's singular configuration (one
+  UAV sees the target on its axis, the others are behind the 30° FOV) and stay there for seconds or lose the
+  target; n = 12 dynamic, the approaching stage ends after its 20 readings at t = 1.0 s, and until then the static
+  algorithm's lag at the 8's fastest point (``|v| Δt / (Λ/2)`` = 0.8 m) is above the dynamic algorithm's
+  steady-state envelope (≈ 0.53 m), so "less than 1 s ... with both algorithms" needs a shorter approach, which
+  the paper does not give (6 readings, the static contraction from 18 m to the sensor noise, gives 0.65 s but a
+  lost E2 run at 8 m/s in 50: the KCF starts from a velocity fitted over the transient).
 * **E2** (004 §5.2): constant-velocity target ``[v, v]``, n = 5: static 0.27 → 0.9 m, dynamic 0.25 → 0.62 m for
   v = 0 → 8 m/s.
 * **E3** (004 §5.3, Fig. 5): rendezvous on a static target after a random search; every UAV's final distance
   to the target circle (paper: all converge; no number given).
+* **E4** (004 §5.4, Fig. 6): the same rendezvous with the "man-like" target (Eqs. (16)-(17), exactly discretised,
+  :mod:`mesh_sim.orbit_targets`; it walks at ≈ 1.4 m/s). Paper: "all distances converge to zero, as expected even
+  in this more challenging scenario" (no number). A centre that estimates ``p(t)`` is one step behind the target at
+  ``t + Δt`` (004 §2.7 step 5; the static algorithm lags ``2/Λ`` times more), so with Δt = 1 s the distances settle
+  near ``|v| Δt`` instead of 0: the goal allows the E3 tolerance plus that lag, measured on the truth. The target
+  walks out of the 200 x 200 m patrol area after ≈ 100 s, and a UAV that has neither found it nor heard a UAV
+  orbiting it by then patrols on for ever: those runs are counted apart ("searching"), with their own goal.
+* **Message loss** (not in the paper, which assumes none, 004 §6): E1 (n = 5, both algorithms) and E2 at v = 0
+  (a static target, static algorithm) with each directed estimation message lost with probability 10 % and 30 %
+  (:func:`tasking.consensus.lossy_weights`): the RMSE against the loss-free run (goal: within 25 %, no run lost)
+  and, on the static target, the mean error in standard errors (goal, full mode: below 3, "even the intermediate
+  estimates ... are unbiased", 004 §3.2).
 
-Choices (the paper does not give them; see :mod:`mesh_sim.orbit_experiments` for the rest): κ = 6, Λ = 1, r = 30 m and
-R_max = ∞ in 6.1 (r calibrated on E2's static v = 0 figure through the closed form, so that goal is a consistency check,
-not a prediction), KCF R = (√2 r σ_η)² I (the reflected measure's noise), P0 = diag(5, 5 m, 8, 8 m/s)², ε = 0.5. In E1
+Choices (the paper does not give them; see :mod:`mesh_sim.orbit_experiments` for the rest): κ = 6, r = 30 m in 6.1
+(``C_r / 2``, as 6.2's 15 m with 30 m), Λ = 1 (from E2's static v = 0 figure through the closed form, so that goal is a
+consistency check, not a prediction), R_max = ∞ in 6.1, KCF R = (√2 r σ_η)² I (the reflected measure's noise),
+P0 = diag(5, 5 m, 8, 8 m/s)², ε = 0.5. In E1
 the dynamic algorithm uses σ_a = 2 m/s² (Bar-Shalom's rule of thumb, 0.5-1 times the 8's peak acceleration of 2.56
-m/s²): with the paper's σ_a = 0.01 m/s² a constant-velocity filter cannot follow the figure-8, which one extra row
-shows; E2 (a truly constant velocity) keeps the paper's 0.01 m/s². "≈" in the goals means within ±30 % (chosen here).
-Quick mode: 2 runs, n ∈ {3, 12}, v ∈ {0, 8}, shorter E2/E3 runs; full: 50 runs per configuration.
+m/s²): with the paper's σ_a = 0.01 m/s² a constant-velocity filter cannot follow the figure-8 (one extra row:
+every run loses it, full mode); E2 (a truly constant velocity) keeps the paper's 0.01 m/s². "≈" in the goals means
+within ±30 % (chosen here).
+Quick mode: 2 runs, n ∈ {3, 12}, v ∈ {0, 8}, shorter E2-E4 runs; full: 50 runs per configuration.
 
 **skymesh's estimator on the same bearings** (:mod:`mesh_sim.orbit_eif`): in every E1/E2 dynamic run, every UAV's
 bearing of every step also goes to skymesh's centralized extended information filter (Merino (3.52), what the
@@ -42,6 +65,7 @@ from fusion.motion import DampedVelocity
 from mesh_sim import orbit_eif
 from mesh_sim import orbit_experiments as oe
 from mesh_sim.bench import common
+from tasking.rendezvous import Stage
 
 NAME = "tasking-orbit"
 E1_SIGMA_A = 2.0  # chosen here (module docstring)
@@ -50,6 +74,12 @@ PAPER_E2 = {("static", 0.0): 0.27, ("static", 8.0): 0.9, ("dynamic", 0.0): 0.25,
 PAPER_STEADY = {3: 4.0, 12: 1.0}  # seconds, upper bounds (004 §5.1)
 CIRCLE_GOAL = 1.0  # m: a UAV counts as on the target circle (chosen here)
 EIF_CV, EIF_DAMPED = "skymesh EIF, CV", "skymesh EIF, damped"  # the rows of skymesh's estimator
+LOSSES = (0.1, 0.3)  # Bernoulli loss of each estimation message (the paper models none, 004 §6)
+LOSS_RMSE_GOAL = 1.25  # "degrades gracefully": RMSE within 25 % of the loss-free run's (chosen here)
+LOSS_BIAS_GOAL = 3.0  # |mean error| below 3 standard errors per axis counts as unbiased (chosen here)
+LOSS_BIAS_RUNS = 10  # the unbiasedness goal needs at least this many runs (full mode; chosen here)
+RENDEZVOUS = {"E3": "static", "E4": "singer"}  # 004 §5.3 and §5.4: the rendezvous experiments and their targets
+PAPER_RENDEZVOUS = {"E3": "Fig. 5: all converge to the circle", "E4": "Fig. 6: all distances converge to zero"}
 
 
 def _modes(quick: bool, repeats: int | None) -> dict:
@@ -94,11 +124,12 @@ def _tracking_rows(
     speed: float = 0.0,
     eif: bool = False,
 ) -> list[dict]:
-    """RMSE and steady-state time over the runs that kept the target (final centre error below ``r``); the runs
-    that lost it (the team ends up blind and searching) are counted apart, since one of them would dominate
-    any mean (the paper reports none). With ``eif``, the rows of skymesh's EIF on the same bearings follow."""
+    """RMSE and steady-state time over the runs that kept the target (:func:`mesh_sim.orbit_experiments.kept_runs`:
+    every centre within ``r`` of it over the steady-state window); the runs that lost it are counted apart, since
+    one of them would dominate any mean (the paper reports none). With ``eif``, the rows of skymesh's EIF on the
+    same bearings follow."""
     result = oe.run_tracking(config, target, runs, seed, speed)
-    kept = np.linalg.norm(result.centre_error[:, -1], axis=-1).max(axis=-1) < config.radius
+    kept = oe.kept_runs(result, config.radius)
     row = _row_of(experiment, algorithm, config, runs, speed, result, kept)
     if not eif:
         return [row]
@@ -153,13 +184,65 @@ def _row_of(
     return row
 
 
+def _loss_rows(
+    experiment: str, algorithm: str, config: oe.OrbitConfig, target: str, runs: int, seed: int, speed: float
+) -> list[dict]:
+    """One E1/E2 configuration without loss and under each of :data:`LOSSES` (same seed): the RMSE, its ratio to
+    the loss-free run's, and the mean error over the kept runs and the steady-state window with its standard error
+    (runs are the independent samples) — on a static target (E2 at v = 0) 004 §3.2's "even the intermediate
+    estimates, i.e., before convergence, are unbiased" says it is 0; on the figure-8 it holds the lag."""
+    rows: list[dict] = []
+    for loss in (0.0, *LOSSES):
+        result = oe.run_tracking(replace(config, message_loss=loss), target, runs, seed, speed)
+        kept = oe.kept_runs(result, config.radius)
+        row = _row_of(f"{experiment} loss", algorithm, config, runs, speed, result, kept)
+        late = result.times > oe.STEADY_STATE_FROM
+        per_run = result.centre_error[kept][:, late].mean(axis=(1, 2))  # (kept runs, 2)
+        mean = per_run.mean(axis=0)
+        error = per_run.std(axis=0, ddof=1) / np.sqrt(len(per_run)) if len(per_run) > 1 else np.full(2, np.nan)
+        row.update(
+            loss=loss,
+            ratio_to_lossless=row["rmse_m"] / (rows[0]["rmse_m"] if rows else row["rmse_m"]),
+            mean_error_m=float(np.linalg.norm(mean)),
+            mean_error_se=float(np.max(np.abs(mean) / error)),
+        )
+        rows.append(row)
+    return rows
+
+
+def _rendezvous_row(experiment: str, algorithm: str, result: oe.SimResult) -> dict:
+    """E3/E4: the runs in which a UAV is still searching at the end (it never found the target nor heard a UAV
+    orbiting it, or lost it), and over the others every UAV's final distance to the target circle, the runs where
+    all are within ``CIRCLE_GOAL`` plus the one-step lag ``|v| Δt`` (the target's mean speed on the truth times the
+    step; 0 for E3), and when."""
+    lag = float(np.mean(np.linalg.norm(np.diff(result.bearings.target, axis=1), axis=-1)))  # |v| Δt per step
+    tolerance = CIRCLE_GOAL + lag
+    orbiting = np.all(result.stage[:, -1] != Stage.SEARCH, axis=-1)
+    distances = oe.final_circle_distances(result)[orbiting]
+    times = oe.rendezvous_time(result, tolerance)[orbiting]
+    return {
+        "experiment": experiment,
+        "algorithm": algorithm,
+        "n": result.circle_distance.shape[-1],
+        "runs": orbiting.size,
+        "searching_runs": int(np.sum(~orbiting)),
+        "final_distance_mean_m": float(distances.mean()) if distances.size else math.nan,
+        "final_distance_max_m": float(distances.max()) if distances.size else math.nan,
+        "lag_m": lag,
+        "tolerance_m": tolerance,
+        "converged_runs": int(np.sum(distances.max(axis=-1) < tolerance)),
+        "rendezvous_time_median_s": float(np.nanmedian(times)) if np.isfinite(times).any() else math.nan,
+    }
+
+
 def run(quick: bool = False, repeats: int | None = None) -> dict:
     mode = _modes(quick, repeats)
     runs = mode["runs"]
     started = time.perf_counter()
     rows: list[dict] = []
     e1 = oe.OrbitConfig(duration=mode["e1_duration"])
-    with common.progress(2 * len(mode["ns"]) + 2 * len(mode["speeds"]) + 3, NAME) as advance:
+    steps = 2 * len(mode["ns"]) + 2 * len(mode["speeds"]) + 2 * len(RENDEZVOUS) + mode["paper_row"] + 3
+    with common.progress(steps, NAME) as advance:
         for n in mode["ns"]:
             rows += _tracking_rows("E1", "static", replace(e1, n=n), "figure8", runs, seed=n)
             advance(f"E1 static n={n}")
@@ -175,26 +258,22 @@ def run(quick: bool = False, repeats: int | None = None) -> dict:
             for algorithm, config in (("static", e2), ("dynamic", replace(e2, dynamic=True))):
                 rows += _tracking_rows("E2", algorithm, config, "cv", runs, 100 + int(v), v, eif=config.dynamic)
                 advance(f"E2 {algorithm} v={v:g}")
-        for algorithm, dynamic in (("static", False), ("dynamic", True)):
-            result = oe.run_rendezvous(oe.rendezvous_config(duration=mode["e3_duration"], dynamic=dynamic), runs, 7)
-            distances = oe.final_circle_distances(result)
-            times = oe.rendezvous_time(result, CIRCLE_GOAL)
-            rows.append(
-                {
-                    "experiment": "E3",
-                    "algorithm": algorithm,
-                    "n": result.circle_distance.shape[-1],
-                    "runs": runs,
-                    "final_distance_mean_m": float(distances.mean()),
-                    "final_distance_max_m": float(distances.max()),
-                    "converged_runs": int(np.sum(distances.max(axis=-1) < CIRCLE_GOAL)),
-                    "rendezvous_time_median_s": float(np.nanmedian(times)) if np.isfinite(times).any() else math.nan,
-                }
-            )
-            advance(f"E3 {algorithm}")
+        lossy = {
+            ("E1", "static"): (replace(e1, n=5), "figure8", 5, 0.0),
+            ("E1", "dynamic"): (replace(e1, n=5, dynamic=True, sigma_a=E1_SIGMA_A), "figure8", 5, 0.0),
+            ("E2", "static"): (e2, "cv", 100, 0.0),
+        }
+        for (experiment, algorithm), (config, target, seed, v) in lossy.items():
+            rows += _loss_rows(experiment, algorithm, config, target, runs, seed, v)
+            advance(f"{experiment} {algorithm} under message loss")
+        for experiment, target in RENDEZVOUS.items():
+            for algorithm, dynamic in (("static", False), ("dynamic", True)):
+                config = oe.rendezvous_config(duration=mode["e3_duration"], dynamic=dynamic)
+                rows.append(_rendezvous_row(experiment, algorithm, oe.run_rendezvous(config, runs, 7, target)))
+                advance(f"{experiment} {algorithm}")
     return {
         "benchmark": NAME,
-        "settings": {**mode, "quick": quick, "e1_sigma_a": E1_SIGMA_A, "tolerance": TOLERANCE},
+        "settings": {**mode, "quick": quick, "e1_sigma_a": E1_SIGMA_A, "tolerance": TOLERANCE, "losses": LOSSES},
         "parameters": _parameters(),
         "rows": rows,
         "goals": _goals(rows, mode),
@@ -270,7 +349,7 @@ def _goals(rows: list[dict], mode: dict) -> list[dict]:
     goals.append(_goal("E1/E2: no run loses the target (paper: none reported)", "0 lost runs", lost or 0, not lost))
     for (algorithm, v), paper in PAPER_E2.items():
         measured = _row(rows, "E2", algorithm, v=v)["rmse_m"]
-        note = " (r calibrated on it)" if (algorithm, v) == ("static", 0.0) else ""
+        note = " (Λ calibrated on it)" if (algorithm, v) == ("static", 0.0) else ""
         goals.append(
             _goal(
                 f"E2 {algorithm} RMSE at v = {v:g} m/s{note}",
@@ -283,16 +362,47 @@ def _goals(rows: list[dict], mode: dict) -> list[dict]:
     goals.append(
         _goal("E2 dynamic beats static at v = 8 m/s", "dynamic < static", [static8, dynamic8], dynamic8 < static8)
     )
-    for algorithm in ("static", "dynamic"):
-        worst = _row(rows, "E3", algorithm)["final_distance_max_m"]
+    lossy = [r for r in rows if r["experiment"].endswith(" loss") and r["loss"] > 0]
+    if mode["runs"] >= LOSS_BIAS_RUNS:  # a standard error from fewer runs says little
+        static_target = {
+            f"{r['algorithm']} {r['loss']:.0%}": r["mean_error_se"] for r in lossy if r["experiment"] == "E2 loss"
+        }
         goals.append(
             _goal(
-                f"E3 rendezvous ({algorithm}): every UAV on the target circle",
-                f"< {CIRCLE_GOAL:g} m",
-                worst,
-                worst < CIRCLE_GOAL,
+                "E2 (static target) under 10/30 % message loss: mean error 0 (unbiased, 004 §3.2)",
+                f"|mean error| < {LOSS_BIAS_GOAL:g} SE per axis",
+                {k: round(v, 2) for k, v in static_target.items()},
+                all(v < LOSS_BIAS_GOAL for v in static_target.values()),
             )
         )
+    ratios = {f"{r['experiment']} {r['algorithm']} {r['loss']:.0%}": round(r["ratio_to_lossless"], 3) for r in lossy}
+    goals.append(
+        _goal(
+            "Message loss 10/30 %: RMSE degrades gracefully, no run lost",
+            f"RMSE ≤ {LOSS_RMSE_GOAL:g} × loss-free",
+            ratios,
+            all(v <= LOSS_RMSE_GOAL for v in ratios.values()) and not any(r["lost_runs"] for r in lossy),
+        )
+    )
+    for experiment in RENDEZVOUS:
+        for algorithm in ("static", "dynamic"):
+            row = _row(rows, experiment, algorithm)
+            goals.append(
+                _goal(
+                    f"{experiment} rendezvous ({algorithm}): every UAV on an orbit at the end",
+                    "0 runs with a UAV searching",
+                    row["searching_runs"],
+                    row["searching_runs"] == 0,
+                )
+            )
+            goals.append(
+                _goal(
+                    f"{experiment} rendezvous ({algorithm}): the orbiting UAVs on the target circle",
+                    f"< {row['tolerance_m']:.2f} m" + (f" ({CIRCLE_GOAL:g} + lag)" if row["lag_m"] else ""),
+                    row["final_distance_max_m"],
+                    row["final_distance_max_m"] < row["tolerance_m"],
+                )
+            )
     return goals
 
 
@@ -341,23 +451,53 @@ def report(result: dict, console=None) -> None:
         ],
     )
     _comparison_table(console, rows)
-    e3 = [r for r in rows if r["experiment"] == "E3"]
     common.print_table(
         console,
-        "E3 rendezvous on a static target: final distance of each UAV to the target circle",
-        ["algorithm", "n", "mean [m]", "max [m]", "runs converged", "median rendezvous time [s]"],
+        "E1 (figure-8, n = 5) / E2 (static target, n = 5, static algorithm) under Bernoulli message loss",
+        ["exp.", "algorithm", "loss", "RMSE [m]", "÷ loss-free", "steady state [s]", "mean error", "lost runs"],
         [
             (
+                r["experiment"],
+                r["algorithm"],
+                f"{r['loss']:.0%}",
+                common.fmt(r["rmse_m"], ".3f"),
+                common.fmt(r["ratio_to_lossless"], ".3f"),
+                common.fmt(r["steady_state_s"], ".2f"),
+                f"{common.fmt(r['mean_error_m'], '.3f')} m ({common.fmt(r['mean_error_se'], '.1f')} SE)"
+                if r["experiment"] == "E2 loss"
+                else "",
+                r["lost_runs"],
+            )
+            for r in rows
+            if r["experiment"].endswith(" loss")
+        ],
+        caption="The paper models no loss (004 §6). A receiver keeps a lost neighbour's Metropolis weight on itself "
+        "(tasking.consensus.lossy_weights). Mean error (static target only): over the kept runs and t > 20 s, in "
+        "standard errors over the runs; 0 if unbiased.",
+    )
+    common.print_table(
+        console,
+        "E3/E4 rendezvous (static / man-like target): final distance of each UAV to the target circle",
+        ["exp.", "algorithm", "n", "searching", "mean [m]", "max [m]", "lag |v|Δt", "converged", "median [s]", "paper"],
+        [
+            (
+                r["experiment"],
                 r["algorithm"],
                 r["n"],
+                f"{r['searching_runs']}/{r['runs']}",
                 common.fmt(r["final_distance_mean_m"], ".3f"),
                 common.fmt(r["final_distance_max_m"], ".3f"),
-                f"{r['converged_runs']}/{r['runs']}",
+                common.fmt(r["lag_m"], ".2f"),
+                f"{r['converged_runs']}/{r['runs'] - r['searching_runs']}",
                 common.fmt(r["rendezvous_time_median_s"], ".0f"),
+                PAPER_RENDEZVOUS[r["experiment"]],
             )
-            for r in e3
+            for r in rows
+            if r["experiment"] in RENDEZVOUS
         ],
-        caption=f"Paper: all distances converge to zero (no number). Converged: every UAV within {CIRCLE_GOAL:g} m.",
+        caption=f"Searching: runs with a UAV still patrolling at the end (E4: the target walks out of the 200 x 200 m "
+        "patrol area after ≈ 100 s). Over the other runs: final distances; converged: every UAV within "
+        f"{CIRCLE_GOAL:g} m plus the lag (no number in the paper); median: when all are, for the rest of the run.",
     )
     common.print_table(
         console,

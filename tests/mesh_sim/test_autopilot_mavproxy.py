@@ -39,7 +39,7 @@ def read_until(popen: subprocess.Popen, wanted: list[str], timeout: float) -> st
     return "".join(out)
 
 
-@pytest.mark.skipif(MAVPROXY is None, reason="mavproxy.py is not installed (make installs it without its GUI dependencies)")
+@pytest.mark.skipif(MAVPROXY is None, reason="mavproxy.py is not installed (make installs it, without its GUI)")
 def test_mavproxy_detects_the_vehicle_its_px4_mode_and_its_parameters(tmp_path):
     with AutopilotProcess.start("--instance", "4") as ap:
         popen = subprocess.Popen(
