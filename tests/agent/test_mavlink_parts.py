@@ -159,3 +159,20 @@ def test_the_reference_restarts_at_a_vehicle_that_could_not_follow():
     for _ in range(30):  # 3 s: the reference is 15 m ahead of a vehicle held at the start
         position, _ = reference.advance(goal, np.zeros(3), 0.1)
     assert reference.restarts == 1 and np.linalg.norm(position) < 10.1  # restarted at the vehicle, then 2 s on
+
+
+def test_a_feed_forward_carries_the_reference_with_a_moving_point():
+    """A point moving east at 3 m/s, given with its velocity: the reference keeps on it (no lag), as the
+    kinematic multirotor does, within one tick's motion; without the feed-forward it trails by the distance at which
+    d / SETTLE_TIME = 3."""
+    def trail(feed_forward):
+        reference = Reference(cruise_speed=10.0)
+        position = np.array([0.0, 0.0, -20.0])
+        for k in range(300):
+            point = np.array([0.0, 3.0 * 0.1 * k, -20.0])
+            setpoint = Setpoint(point, velocity=(0.0, 3.0) if feed_forward else None)
+            position, velocity = reference.advance(setpoint, position, 0.1)
+        return np.linalg.norm(point + [0.0, 0.3, 0.0] - position)  # where the point is at the end of the tick
+
+    assert trail(True) < 0.3  # within the point's motion over one tick (the point is held through the tick)
+    assert trail(False) == pytest.approx(3.0 * SETTLE_TIME, abs=0.35)

@@ -15,6 +15,10 @@ the last, the reference moves ``p_ref += v_ref dt`` (the midpoint rule: Euler's 
   at the reference, at speed ``limit`` — the guidance the kinematic models fly — and vertically the point law
   toward the orbit's depth.
 
+A setpoint's velocity feed-forward (``Setpoint.velocity``: the point's or the orbit centre's own motion) is added
+horizontally to either, as the kinematic multirotor adds it: the guidance then acts in the frame moving with the
+point or the centre, and the autopilot's own limits bound the sum.
+
 ``limit`` is the setpoint's speed, or the vehicle's cruise speed when it has none. The reference starts at the
 vehicle, and starts there again whenever the vehicle is more than ``LEASH_TIME · limit`` from it (the
 autopilot could not follow: it was held, or slower than asked), so it never runs away. A new setpoint takes
@@ -47,11 +51,15 @@ def speed_limit(setpoint: Setpoint, cruise_speed: float) -> float:
 def reference_velocity(setpoint: Setpoint, position: np.ndarray, limit: float) -> np.ndarray:
     """The velocity (3,) the setpoint asks for at ``position`` (module docstring)."""
     if setpoint.orbit is None:
-        return _approach(setpoint.position - position, limit)
-    center, radius, direction = setpoint.orbit
-    horizontal = orbit_vector_field(position[:2] - center, radius, direction, limit)
-    vertical = _approach(np.array([setpoint.position[2] - position[2]]), limit)
-    return np.array([horizontal[0], horizontal[1], vertical[0]])
+        velocity = _approach(setpoint.position - position, limit)
+    else:
+        center, radius, direction = setpoint.orbit
+        horizontal = orbit_vector_field(position[:2] - center, radius, direction, limit)
+        vertical = _approach(np.array([setpoint.position[2] - position[2]]), limit)
+        velocity = np.array([horizontal[0], horizontal[1], vertical[0]])
+    if setpoint.velocity is not None:
+        velocity[:2] += setpoint.velocity
+    return velocity
 
 
 class Reference:
