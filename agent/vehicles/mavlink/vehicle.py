@@ -88,6 +88,7 @@ class MavlinkVehicle:
         self._mode: int | None = None  # the custom (main) mode the vehicle must stay in, once commanded
         self._timesyncs: dict[int, None] = {}  # ts1 of the TIMESYNC requests in flight
         self._reason = "starting"
+        self.health_changes: list[tuple[float, str]] = []  # (wall time [s], reason; "" when healthy again)
         self._started = time.monotonic()
         self.link = MavlinkLink(config.url, self._on_message, baud=config.baud, component_id=config.component_id,
                                 max_message_rate=config.max_message_rate)
@@ -135,6 +136,7 @@ class MavlinkVehicle:
             (log.info if not reason else log.warning)("MAVLink vehicle %s: %s", self.config.url,
                                                       reason or "healthy")
             self._reason = reason
+            self.health_changes.append((time.time(), reason))
 
     def close(self) -> None:
         """Stop the link and its thread (and with them the setpoint stream)."""
@@ -292,6 +294,7 @@ class MavlinkVehicle:
                             "rejected_by_reason": dict(self.link.rejected), "setpoints_sent": self.setpoints_sent,
                             "commands_sent": 0 if self.commander is None else self.commander.sent,
                             "stale_steps": self.stale_steps, "reference_restarts": self.reference.restarts,
+                            "health_changes": [[t, reason] for t, reason in self.health_changes],
                             "clock": {"source": clock.source, "offset": clock.offset, "round_trip": clock.round_trip}}}
 
 
