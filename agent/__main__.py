@@ -79,9 +79,13 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def with_mavlink(vehicle: dict, url: str) -> dict:
     """The scenario's ``[vehicle]`` table flying the autopilot at ``url``: ``{"kind": "mavlink", "url": url}``, plus
-    the table's own keys if it already is a MAVLink vehicle (its ``autopilot``, timeouts...)."""
-    own = vehicle if vehicle.get("kind") == "mavlink" else {}
-    return {**own, "kind": "mavlink", "url": url}
+    the table's own keys if it already is a MAVLink vehicle (its ``autopilot``, timeouts...), or else the simulated
+    vehicle's speed (a multirotor's ``max_speed``, a fixed wing's ``airspeed``) as its ``cruise_speed``: the
+    mission is flown as fast as the scenario meant."""
+    if vehicle.get("kind") == "mavlink":
+        return {**vehicle, "url": url}
+    speed = vehicle.get("max_speed", vehicle.get("airspeed"))
+    return {"kind": "mavlink", "url": url, **({} if speed is None else {"cruise_speed": speed})}
 
 
 def _open_camera(source: str):

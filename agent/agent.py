@@ -109,8 +109,8 @@ class Agent:
             self._offer(exchange, t, neighbours)
         goal = self.planner.plan(state, self.views)
         self.vehicle.set_setpoint(goal_to_setpoint(goal))
-        for sensor in self.sensors:
-            sensor.point(goal.look_at)  # the gimbal command, for the next step's measurements
+        for part in (*self.sensors, self.vehicle):
+            part.point(goal.look_at)  # the gimbal command, for the next step's measurements (a real one's too)
         self.vehicle.step(self.scenario.step)
         for exchange in self.exchanges.values():
             exchange.evaluate(t, truth)

@@ -105,13 +105,17 @@ class Vehicle(Protocol):
 
     ``healthy``: flying the agent's setpoints (``False``: the autopilot is lost, took over, or the battery is
     low; tasking then gives its tasks to others). ``battery``: remaining charge 0-1, ``None`` when unknown (a
-    simulated vehicle: the health model's fuel stands in). ``failed``: the vehicle reports a failure."""
+    simulated vehicle: the health model's fuel stands in). ``failed``: the vehicle reports a failure.
+    ``point(look_at)``: the planner's gimbal command (``Goal.look_at``, NED, or ``None``), as the sensors get it:
+    a real vehicle's gimbal points there; a simulated one has none (a camera sensor steers its own)."""
 
     healthy: bool
     battery: float | None
     failed: bool
 
     def state(self) -> VehicleState: ...
+
+    def point(self, look_at) -> None: ...
 
     def set_setpoint(self, setpoint: Setpoint) -> None: ...
 
@@ -155,6 +159,9 @@ class KinematicModel(ABC):
     healthy = True  # a simulated vehicle never loses its autopilot
     battery = None  # nor reports a battery (the health model's fuel stands in)
     failed = False
+
+    def point(self, look_at) -> None:  # noqa: B027 - no gimbal: a simulated camera steers itself (Sensor.point)
+        """No gimbal on a kinematic model."""
 
     @property
     def setpoint(self) -> Setpoint:

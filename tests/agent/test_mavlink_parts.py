@@ -176,3 +176,15 @@ def test_a_feed_forward_carries_the_reference_with_a_moving_point():
 
     assert trail(True) < 0.3  # within the point's motion over one tick (the point is held through the tick)
     assert trail(False) == pytest.approx(3.0 * SETTLE_TIME, abs=0.35)
+
+
+def test_mavlink_replaces_the_scenarios_vehicle_at_the_speed_it_flew():
+    from agent.__main__ import with_mavlink
+
+    url = "udpin:0.0.0.0:14540"
+    assert with_mavlink({"kind": "multirotor", "max_speed": 12.0}, url) == {
+        "kind": "mavlink", "url": url, "cruise_speed": 12.0}
+    assert with_mavlink({"kind": "fixed_wing", "airspeed": 18.0}, url)["cruise_speed"] == 18.0
+    assert with_mavlink({"kind": "multirotor"}, url) == {"kind": "mavlink", "url": url}  # the vehicle's default
+    kept = with_mavlink({"kind": "mavlink", "url": "tcp:a:1", "autopilot": "ardupilot"}, url)
+    assert kept == {"kind": "mavlink", "url": url, "autopilot": "ardupilot"}  # a MAVLink table keeps its keys

@@ -4,6 +4,9 @@ sense with a stale pose."""
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -74,14 +77,19 @@ def test_a_reported_failure_is_a_failure_of_the_health_model(flying):
     assert a.sortie.health.failed and a.sortie.health.failures == 1
 
 
-def test_the_agent_does_not_sense_with_a_stale_pose(flying):
-    peer, vehicle = flying
-    vehicle.close()  # the agent builds its own vehicle on the same autopilot
+def _agent_on(peer) -> Agent:
+    """An agent whose scenario's vehicle is the scripted autopilot ``peer``."""
     scenario = AgentScenario.from_dict({
         "agents": 1, "origin": dict(zip(("lat", "lon", "alt"), SCENARIO_ORIGIN, strict=True)),
         "vehicle": {"kind": "mavlink", "url": f"udpin:127.0.0.1:{peer.address[1]}", "takeoff_altitude": 3.0}})
     keys = Keys("mavlink-test")
-    agent = Agent("uav0", 0, scenario, InMemoryBus().endpoint("uav0", keys.agent_subscriptions()), keys, seed=1)
+    return Agent("uav0", 0, scenario, InMemoryBus().endpoint("uav0", keys.agent_subscriptions()), keys, seed=1)
+
+
+def test_the_agent_does_not_sense_with_a_stale_pose(flying):
+    peer, vehicle = flying
+    vehicle.close()  # the agent builds its own vehicle on the same autopilot
+    agent = _agent_on(peer)
     try:
         measured = []
         measure = agent.sensor.measure
@@ -95,5 +103,23 @@ def test_the_agent_does_not_sense_with_a_stale_pose(flying):
         assert measured == [True]  # no measurement with the stale pose
         metrics = agent.metrics()
         assert metrics["vehicle"]["stale_steps"] == 1 and not metrics["vehicle"]["healthy"]
+    finally:
+        agent.close()
+
+
+def test_the_planners_look_at_reaches_the_autopilots_gimbal(flying):
+    """A goal with ``look_at`` (the feature planner's, spec 003) points the camera through the gimbal protocol:
+    the agent hands it to the vehicle as to its sensors."""
+    peer, vehicle = flying
+    vehicle.close()
+    agent = _agent_on(peer)
+    try:
+        wait_for(lambda: agent.vehicle.healthy)
+        plan = agent.planner.plan
+        here = agent.vehicle.state().position
+        agent.planner.plan = lambda state, views: replace(plan(state, views), look_at=here + [0.0, 0.0, 50.0])
+        agent.step(0.0)
+        wait_for(lambda: peer.received["GIMBAL_MANAGER_SET_PITCHYAW"])
+        assert peer.messages("GIMBAL_MANAGER_SET_PITCHYAW")[-1].pitch == pytest.approx(-math.pi / 2)  # straight down
     finally:
         agent.close()

@@ -280,7 +280,7 @@ def test_without_timesync_the_stamps_give_the_offset():
 def test_the_gimbal_is_pointed_with_gimbal_manager_set_pitchyaw_and_read_back(flying):
     peer, vehicle = flying
     here = vehicle.state().position
-    vehicle.point_gimbal(here + np.array([0.0, 40.0, 40.0]))  # 40 m east, 40 m below
+    vehicle.point(here + np.array([0.0, 40.0, 40.0]))  # 40 m east, 40 m below
     wait_for(lambda: peer.received["GIMBAL_MANAGER_SET_PITCHYAW"])
     msg = peer.messages("GIMBAL_MANAGER_SET_PITCHYAW")[-1]
     buffer = msg.get_msgbuf()

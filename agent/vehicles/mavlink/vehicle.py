@@ -20,7 +20,7 @@ the position known, and the vehicle armed, in OFFBOARD (PX4) or GUIDED (ArduPilo
   over), the take-off is not over, or the battery is below ``battery_reserve``. An unhealthy vehicle bids for no
   task (:class:`agent.beliefs.assignment.AssignmentExchange`), so the fleet's consensus gives its tasks to others;
   :attr:`battery` and :attr:`failed` feed the assignment's health model;
-* :meth:`point_gimbal` points the camera with the gimbal protocol v2, :meth:`gimbal_attitude` reads it back.
+* :meth:`point` points the camera with the gimbal protocol v2, :meth:`gimbal_attitude` reads it back.
 
 Closing it stops the stream: the autopilot's own offboard-loss failsafe (PX4 ``COM_OBL_RC_ACT``, ArduPilot
 ``GUID_TIMEOUT``) then decides what the vehicle does.
@@ -266,7 +266,7 @@ class MavlinkVehicle:
             self.clock.observe_timesync(msg.ts1, msg.tc1, now)
 
     # -- the gimbal (gimbal protocol v2) -----------------------------------------------------------------
-    def point_gimbal(self, look_at) -> None:
+    def point(self, look_at) -> None:
         """Point the camera at ``look_at`` (NED point of the scenario, ``None``: leave it) with
         GIMBAL_MANAGER_SET_PITCHYAW (MAVLink 2, id 287) to the autopilot's gimbal manager, all gimbals
         (``gimbal_device_id`` 0): pitch (positive up) and yaw from north (GIMBAL_MANAGER_FLAGS_YAW_IN_EARTH_FRAME)
