@@ -80,12 +80,13 @@ def parse_args(argv=None) -> argparse.Namespace:
 def with_mavlink(vehicle: dict, url: str) -> dict:
     """The scenario's ``[vehicle]`` table flying the autopilot at ``url``: ``{"kind": "mavlink", "url": url}``, plus
     the table's own keys if it already is a MAVLink vehicle (its ``autopilot``, timeouts...), or else the simulated
-    vehicle's speed (a multirotor's ``max_speed``, a fixed wing's ``airspeed``) as its ``cruise_speed``: the
-    mission is flown as fast as the scenario meant."""
+    vehicle's speed (a multirotor's ``max_speed``, a fixed wing's ``airspeed``) as its ``cruise_speed`` and its
+    ``max_accel``: the mission is flown as the scenario meant."""
     if vehicle.get("kind") == "mavlink":
         return {**vehicle, "url": url}
     speed = vehicle.get("max_speed", vehicle.get("airspeed"))
-    return {"kind": "mavlink", "url": url, **({} if speed is None else {"cruise_speed": speed})}
+    carried = {"cruise_speed": speed, "max_accel": vehicle.get("max_accel")}
+    return {"kind": "mavlink", "url": url, **{key: value for key, value in carried.items() if value is not None}}
 
 
 def _open_camera(source: str):

@@ -95,6 +95,8 @@ def reassignment_s(metrics: dict, victim: str, t_fault: float) -> tuple[float | 
     maps = [_held(line, t) for line in peers for t in
             (t_fault - SERVED_WINDOW, *(t for t, _ in line if t_fault - SERVED_WINDOW < t <= t_fault))]
     served = sorted({label for held in maps for label, who in held.items() if who == victim})
+    if not served:
+        return None, served  # it served nothing the others knew of: nothing to reassign
     for t in sorted({t for line in peers for t, _ in line if t > t_fault}):
         maps = [_held(line, t) for line in peers]
         if all(m.get(label) != victim and (":" in label or m.get(label) is not None)  # a track needs a server
@@ -150,7 +152,7 @@ def _goals(rows: list[dict], fault: dict) -> list[dict]:
         {"name": "a dropped autopilot link detected", "target": f"≤ {DETECTION_GOAL:g} s", "measured": detection,
          "met": detection is not None and detection <= DETECTION_GOAL},
         {"name": "its tasks reassigned by the fleet", "target": "yes", "measured": fault["reassignment_s"],
-         "met": fault["reassignment_s"] is not None},
+         "met": None if not fault["served"] else fault["reassignment_s"] is not None},  # None: nothing to reassign
     ]
 
 

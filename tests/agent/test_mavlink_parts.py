@@ -184,7 +184,17 @@ def test_mavlink_replaces_the_scenarios_vehicle_at_the_speed_it_flew():
     url = "udpin:0.0.0.0:14540"
     assert with_mavlink({"kind": "multirotor", "max_speed": 12.0}, url) == {
         "kind": "mavlink", "url": url, "cruise_speed": 12.0}
+    assert with_mavlink({"kind": "multirotor", "max_accel": 4.0}, url)["max_accel"] == 4.0
     assert with_mavlink({"kind": "fixed_wing", "airspeed": 18.0}, url)["cruise_speed"] == 18.0
     assert with_mavlink({"kind": "multirotor"}, url) == {"kind": "mavlink", "url": url}  # the vehicle's default
     kept = with_mavlink({"kind": "mavlink", "url": "tcp:a:1", "autopilot": "ardupilot"}, url)
     assert kept == {"kind": "mavlink", "url": url, "autopilot": "ardupilot"}  # a MAVLink table keeps its keys
+
+
+def test_an_orbit_is_flown_no_faster_than_its_radius_allows():
+    """12 m/s asked on a 15 m circle: the reference flies sqrt(0.8 a r) = 6 m/s at a = 3 m/s², as the kinematic
+    multirotor would (144/15 = 9.6 m/s² of centripetal acceleration is beyond the vehicle)."""
+    reference = Reference(cruise_speed=12.0, max_accel=3.0)
+    setpoint = Setpoint([0.0, 0.0, -30.0], orbit=(np.array([0.0, 0.0]), 15.0, 1))
+    position, velocity = reference.advance(setpoint, np.array([15.0, 0.0, -30.0]), 0.0)
+    assert np.linalg.norm(velocity[:2]) == pytest.approx(6.0)

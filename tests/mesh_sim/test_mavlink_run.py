@@ -69,3 +69,5 @@ def test_failover_times_from_timelines():
     flicker = {"agents": [_agent("uav0", [[0.0, before], [9.9, {"walker": "uav0"}], [12.0, {"car": "uav2"}]]),
                           _agent("uav1", [[0.0, before]])]}
     assert reassignment_s(flicker, "uav1", 10.0) == (pytest.approx(2.0), ["car", "search:0:0"])
+    idle = {"agents": [_agent("uav0", [[0.0, {"car": "uav0"}], [11.0, {}]]), _agent("uav1", [[0.0, {}]])]}
+    assert reassignment_s(idle, "uav1", 10.0) == (None, [])  # it served nothing: nothing to reassign

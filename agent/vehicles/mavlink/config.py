@@ -13,6 +13,8 @@ key                default                 meaning
                                            ``"auto"``: the HEARTBEAT's MAV_AUTOPILOT says
 ``takeoff_altitude`` 10.0                  metres above home at which the take-off ends
 ``cruise_speed``   5.0                     m/s: orbit speed and the default speed limit of a setpoint
+``max_accel``      3.0                     m/s²: orbits are flown at most at sqrt(0.8 max_accel r), as the
+                                           kinematic multirotor flies them (v²/r within the limit)
 ``setpoint_rate_hz`` 10.0                  SET_POSITION_TARGET_LOCAL_NED stream rate (PX4 leaves OFFBOARD
                                            below 2 Hz: PX4 user guide, "Offboard Mode")
 ``heartbeat_timeout`` 2.0                  s without an autopilot HEARTBEAT (or a position) = link lost
@@ -45,6 +47,7 @@ class MavlinkConfig:
     autopilot: str = "auto"
     takeoff_altitude: float = 10.0
     cruise_speed: float = 5.0
+    max_accel: float = 3.0
     setpoint_rate_hz: float = 10.0
     heartbeat_timeout: float = 2.0
     connect_timeout: float = 10.0
@@ -68,8 +71,8 @@ class MavlinkConfig:
         if isinstance(self.component_id, bool) or not isinstance(self.component_id, int) \
                 or not 1 <= self.component_id <= 255:
             raise ValueError(f"component_id: must be an integer in [1, 255], got {self.component_id!r}")
-        for name in ("takeoff_altitude", "cruise_speed", "setpoint_rate_hz", "heartbeat_timeout", "connect_timeout",
-                     "position_timeout", "command_timeout", "max_message_rate"):
+        for name in ("takeoff_altitude", "cruise_speed", "max_accel", "setpoint_rate_hz", "heartbeat_timeout",
+                     "connect_timeout", "position_timeout", "command_timeout", "max_message_rate"):
             try:
                 positive(name, getattr(self, name))
             except ValueError as error:

@@ -19,7 +19,9 @@ A setpoint's velocity feed-forward (``Setpoint.velocity``: the point's or the or
 horizontally to either, as the kinematic multirotor adds it: the guidance then acts in the frame moving with the
 point or the centre, and the autopilot's own limits bound the sum.
 
-``limit`` is the setpoint's speed, or the vehicle's cruise speed when it has none. The reference starts at the
+``limit`` is the setpoint's speed, or the vehicle's cruise speed when it has none; on an orbit of radius ``r`` at
+most ``sqrt(0.8 a_max r)``, the kinematic multirotor's cruise (the centripetal ``v²/r`` within the acceleration the
+vehicle is asked for, ``max_accel``). The reference starts at the
 vehicle, and starts there again whenever the vehicle is more than ``LEASH_TIME · limit`` from it (the
 autopilot could not follow: it was held, or slower than asked), so it never runs away. A new setpoint takes
 the reference on from where it is, so the commanded motion has no jump.
@@ -48,13 +50,15 @@ def speed_limit(setpoint: Setpoint, cruise_speed: float) -> float:
     return cruise_speed if setpoint.speed is None else min(cruise_speed, setpoint.speed)
 
 
-def reference_velocity(setpoint: Setpoint, position: np.ndarray, limit: float) -> np.ndarray:
+def reference_velocity(setpoint: Setpoint, position: np.ndarray, limit: float, max_accel: float = np.inf
+                       ) -> np.ndarray:
     """The velocity (3,) the setpoint asks for at ``position`` (module docstring)."""
     if setpoint.orbit is None:
         velocity = _approach(setpoint.position - position, limit)
     else:
         center, radius, direction = setpoint.orbit
-        horizontal = orbit_vector_field(position[:2] - center, radius, direction, limit)
+        cruise = min(limit, float(np.sqrt(0.8 * max_accel * radius)))  # v²/r <= 0.8 a_max
+        horizontal = orbit_vector_field(position[:2] - center, radius, direction, cruise)
         vertical = _approach(np.array([setpoint.position[2] - position[2]]), limit)
         velocity = np.array([horizontal[0], horizontal[1], vertical[0]])
     if setpoint.velocity is not None:
@@ -65,8 +69,8 @@ def reference_velocity(setpoint: Setpoint, position: np.ndarray, limit: float) -
 class Reference:
     """The moving reference of the module docstring; :meth:`advance` once per streamed setpoint."""
 
-    def __init__(self, cruise_speed: float):
-        self.cruise_speed = cruise_speed
+    def __init__(self, cruise_speed: float, max_accel: float = np.inf):
+        self.cruise_speed, self.max_accel = cruise_speed, max_accel
         self.position: np.ndarray | None = None  # scenario NED [m]
         self.velocity = np.zeros(3)
         self.restarts = 0  # times the vehicle was out of the leash
@@ -78,7 +82,7 @@ class Reference:
         leash = max(MIN_LEASH, LEASH_TIME * limit)
         if self.position is None or np.linalg.norm(self.position - vehicle_position) > leash:
             self.position, self.restarts = vehicle_position.copy(), self.restarts + (self.position is not None)
-        half = self.position + reference_velocity(setpoint, self.position, limit) * (dt / 2)
-        self.position = self.position + reference_velocity(setpoint, half, limit) * dt  # midpoint rule
-        self.velocity = reference_velocity(setpoint, self.position, limit)
+        half = self.position + reference_velocity(setpoint, self.position, limit, self.max_accel) * (dt / 2)
+        self.position = self.position + reference_velocity(setpoint, half, limit, self.max_accel) * dt  # midpoint
+        self.velocity = reference_velocity(setpoint, self.position, limit, self.max_accel)
         return self.position.copy(), self.velocity.copy()

@@ -82,7 +82,7 @@ class MavlinkVehicle:
         self.autopilot = config.autopilot  # "px4" or "ardupilot" once the autopilot is heard
         self._frames: tuple[tuple, FrameMap] | None = None
         self._setpoint: Setpoint | None = None
-        self.reference = Reference(config.cruise_speed)  # what the stream sends (scenario frame)
+        self.reference = Reference(config.cruise_speed, config.max_accel)  # what the stream sends (scenario frame)
         self._streamed_at: float | None = None  # monotonic time of the last setpoint streamed
         self._takeoff: tuple[float, bool] | None = None  # (local z of the end of the climb, stream during it)
         self._mode: int | None = None  # the custom (main) mode the vehicle must stay in, once commanded
