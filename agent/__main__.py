@@ -4,6 +4,12 @@ Example: ``python -m agent --id uav0 --index 0 --fleet demo --scenario run/scena
 --connect tcp/127.0.0.1:7447 --epoch 1700000000.0 --out run/``. With ``--zenoh-config FILE`` the agent
 uses a standard Zenoh JSON5 configuration instead (a real deployment across machines).
 
+``--mavlink URL`` flies a real (or SITL) PX4 or ArduPilot autopilot at a pymavlink connection string
+(``udpin:0.0.0.0:14540`` for PX4 SITL, ``tcp:127.0.0.1:5760`` for ArduPilot SITL, ``/dev/ttyUSB0``) instead of the
+scenario's vehicle (:mod:`agent.vehicles.mavlink`; a scenario whose vehicle is already ``mavlink`` keeps its other
+keys). A link that cannot be opened, an autopilot that never sends a heartbeat or refuses to arm is an error (exit
+code 2) before the agent's loop starts.
+
 ``--camera SOURCE`` replaces the synthetic camera with an OpenCV video source (a file path, a device
 index such as ``0``, a stream URL): one frame is read per agent step, the pose comes from the vehicle as
 usual. A source that cannot be opened is an error at start (exit code 2).
@@ -25,6 +31,7 @@ import os
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from agent.agent import Agent
@@ -40,6 +47,7 @@ from agent.runtime import (
     wait_for_epoch,
     write_json,
 )
+from agent.vehicles.base import VehicleError
 
 log = logging.getLogger("skymesh.agent")
 
@@ -63,7 +71,22 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--ready-file", help="created once this process is ready (with --epoch-file)")
     p.add_argument("--camera", metavar="SOURCE",
                    help="an OpenCV video source (file, device index, stream URL) instead of the synthetic camera")
+    p.add_argument("--mavlink", metavar="URL",
+                   help="fly the autopilot at this pymavlink connection string (udpin:0.0.0.0:14540, "
+                        "tcp:127.0.0.1:5760, /dev/ttyUSB0) instead of the scenario's vehicle")
     return p.parse_args(argv)
+
+
+def with_mavlink(vehicle: dict, url: str) -> dict:
+    """The scenario's ``[vehicle]`` table flying the autopilot at ``url``: ``{"kind": "mavlink", "url": url}``, plus
+    the table's own keys if it already is a MAVLink vehicle (its ``autopilot``, timeouts...), or else the simulated
+    vehicle's speed (a multirotor's ``max_speed``, a fixed wing's ``airspeed``) as its ``cruise_speed`` and its
+    ``max_accel``: the mission is flown as the scenario meant."""
+    if vehicle.get("kind") == "mavlink":
+        return {**vehicle, "url": url}
+    speed = vehicle.get("max_speed", vehicle.get("airspeed"))
+    carried = {"cruise_speed": speed, "max_accel": vehicle.get("max_accel")}
+    return {"kind": "mavlink", "url": url, **{key: value for key, value in carried.items() if value is not None}}
 
 
 def _open_camera(source: str):
@@ -78,6 +101,8 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     try:
         scenario = AgentScenario.from_dict(read_scenario_file(args.scenario))
+        if args.mavlink is not None:
+            scenario = replace(scenario, vehicle=with_mavlink(scenario.vehicle, args.mavlink))
         key = Path(args.fleet_key_file).read_bytes().strip() if args.fleet_key_file else None
         keys = Keys(args.fleet)
         config = load_config(args.connect, args.zenoh_config)
@@ -88,7 +113,12 @@ def main(argv=None) -> int:
     duration = args.duration if args.duration is not None else scenario.duration
     subscribe = keys.agent_subscriptions()
     transport = ZenohTransport(args.id, keys, config, subscribe)
-    agent = Agent(args.id, args.index, scenario, transport, keys, seed=args.seed, fleet_key=key, camera=camera)
+    try:
+        agent = Agent(args.id, args.index, scenario, transport, keys, seed=args.seed, fleet_key=key, camera=camera)
+    except (VehicleError, ValueError) as err:  # a vehicle that cannot fly: nothing has run yet
+        transport.close()
+        print(f"agent {args.id}: {err}", file=sys.stderr)
+        return 2
     stop = threading.Event()
     install_stop_handlers(stop)
     epoch = args.epoch if args.epoch is not None else time.time()

@@ -48,7 +48,7 @@ class Agent:
                  seed: int, fleet_key: bytes | None = None, camera=None):
         self.id, self.index, self.scenario, self.keys, self.fleet_key = agent_id, index, scenario, keys, fleet_key
         self.terrain = terrain_from_config(scenario.terrain)
-        self.vehicle = vehicle_from_config(scenario.vehicle, scenario.start_position(index), 0.0)
+        self.vehicle = vehicle_from_config(scenario.vehicle, scenario.start_position(index), 0.0, scenario.origin)
         self.sensor = sensor_from_config(scenario.sensor, seed, self.terrain, camera)
         self.world = WorldTruth(self.terrain, agent_id)
         self.unused: Counter = Counter()  # reason -> observations the agent could not use
@@ -93,7 +93,7 @@ class Agent:
         state = self.vehicle.state()
         truth = self.world.at(t)
         observations: dict = {}
-        for sensor in self.sensors:
+        for sensor in self.sensors if state.fresh else ():  # a stale pose (autopilot lost) georeferences nothing
             sensor.on_truth(truth)
             observations.update(sensor.measure(t, state))
         for exchange in self.exchanges.values():
@@ -109,17 +109,17 @@ class Agent:
             self._offer(exchange, t, neighbours)
         goal = self.planner.plan(state, self.views)
         self.vehicle.set_setpoint(goal_to_setpoint(goal))
-        for sensor in self.sensors:
-            sensor.point(goal.look_at)  # the gimbal command, for the next step's measurements
+        for part in (*self.sensors, self.vehicle):
+            part.point(goal.look_at)  # the gimbal command, for the next step's measurements (a real one's too)
         self.vehicle.step(self.scenario.step)
         for exchange in self.exchanges.values():
             exchange.evaluate(t, truth)
         self.steps += 1
 
     def close(self) -> None:
-        """Release the sensors (an external camera)."""
-        for sensor in self.sensors:
-            sensor.close()
+        """Release the sensors (an external camera) and the vehicle (a MAVLink link)."""
+        for part in (*self.sensors, self.vehicle):
+            part.close()
 
     # -- receiving ------------------------------------------------------------------------------
     def receive(self, item: Incoming, t: float) -> None:
@@ -238,7 +238,7 @@ class Agent:
             "sensor": sensor,
             "sensor_outcomes": dict(Counter(sensor["outcomes"]) + self.unused),
         }
-        for part in (*self.exchanges.values(), self.planner):  # a planner's metrics are optional
+        for part in (*self.exchanges.values(), self.planner, self.vehicle):  # their metrics are optional
             out.update(getattr(part, "metrics", dict)())
         return out
 

@@ -5,10 +5,11 @@
   [--sizes 8,16,32]`` — the options of :data:`BENCH_OPTIONS`, for the benchmarks that take them;
 * ``skymesh bench --list`` — list the benchmarks;
 * ``skymesh run [--scenario NAME|FILE] [--agents N] [--duration S] [--speed X] [--seed K] [--out DIR]
-  [--policy P] [--rerun save|spawn|connect:URL|off] [--camera uavK=SOURCE ...]`` — a team of agent processes
-  over Zenoh (``mesh_sim.launcher``); with no arguments, the default scenario. ``--camera uav0=clip.avi``
-  replaces that agent's synthetic camera with an OpenCV video source (file, device index, stream URL);
-  a source that cannot be opened is a usage error before anything starts;
+  [--policy P] [--rerun save|spawn|connect:URL|off] [--camera uavK=SOURCE ...] [--vehicle kinematic|mavlink]``
+  — a team of agent processes over Zenoh (``mesh_sim.launcher``); with no arguments, the default scenario.
+  ``--vehicle mavlink`` starts a ``skymesh autopilot`` per agent and flies each agent over MAVLink UDP.
+  ``--camera uav0=clip.avi`` replaces that agent's synthetic camera with an OpenCV video source (file, device
+  index, stream URL); a source that cannot be opened is a usage error before anything starts;
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
 * ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``);
 * ``skymesh compare BEFORE AFTER [--plain] [--limit N]`` — compare two run folders exactly, volatile fields
@@ -90,6 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
         run.add_argument("--rerun", default="save", help="save (default), spawn, connect:URL or off")
         run.add_argument("--lockstep", action="store_true",
                          help="all agents in this process over an in-memory bus, deterministic and fast")
+        run.add_argument("--vehicle", choices=["kinematic", "mavlink"], default="kinematic",
+                         help="kinematic: each agent flies its own model; mavlink: a skymesh autopilot per agent, "
+                              "flown over MAVLink UDP (live runs at --speed 1)")
         run.add_argument("--camera", action="append", default=[], metavar="AGENT=SOURCE",
                          help="replace an agent's synthetic camera with an OpenCV source (file, device index, URL), "
                               "e.g. uav0=clip.avi; repeatable")
@@ -189,10 +193,12 @@ def _run(args) -> int:
         if args.lockstep:
             if args.rerun not in ("save", "off"):
                 raise ValueError("--lockstep records with --rerun save or off")
+            if args.vehicle != "kinematic":
+                raise ValueError("--lockstep flies the kinematic models (the autopilots run on the wall clock)")
             metrics, status = run_lockstep(scenario, run_dir, rerun=args.rerun, cameras=cameras), "completed"
         else:
             outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console,
-                               cameras=cameras).run()
+                               cameras=cameras, vehicle=args.vehicle).run()
             metrics, status = outcome.metrics, outcome.status
     except (ValueError, OSError) as err:
         print(f"skymesh run: {err}", file=sys.stderr)

@@ -38,12 +38,13 @@ from mesh_sim.scenario import Scenario
 START_DELAY_S = 0.5  # wall seconds between "everyone is ready" and simulation time 0; chosen here
 READY_TIMEOUT_S = 120.0  # a process that is not ready by then fails the run
 GRACE_S = 10.0  # wall seconds between SIGTERM and SIGKILL
+VEHICLES = ("kinematic", "mavlink")  # each agent's own kinematic model, or an autopilot simulator over MAVLink
 
 
 @dataclass
 class Child:
     name: str
-    role: str  # "agent", "world" or "observer"
+    role: str  # "agent", "world", "observer" or "autopilot"
     process: subprocess.Popen
     log_path: Path
     started: float  # wall time just before the spawn [s since the Unix epoch]
@@ -74,9 +75,14 @@ def new_run_dir(base: Path, name: str) -> Path:
 
 class Launcher:
     def __init__(self, scenario: Scenario, run_dir: Path, speed: float = 1.0, rerun: str = "save",
-                 console: Console | None = None, extra_env: dict | None = None, cameras: dict | None = None):
+                 console: Console | None = None, extra_env: dict | None = None, cameras: dict | None = None,
+                 vehicle: str = "kinematic"):
         if not speed > 0:
             raise ValueError(f"--speed must be positive, got {speed}")
+        if vehicle not in VEHICLES:
+            raise ValueError(f"--vehicle must be one of {', '.join(VEHICLES)}, got {vehicle!r}")
+        if vehicle == "mavlink" and speed != 1.0:
+            raise ValueError("--vehicle mavlink runs at --speed 1: the autopilots fly on the wall clock")
         if rerun not in ("save", "spawn", "off") and not rerun.startswith("connect:"):
             raise ValueError(f"--rerun must be save, spawn, off or connect:URL, got {rerun!r}")
         self.scenario = scenario
@@ -87,6 +93,7 @@ class Launcher:
         self.env = {**os.environ, **(extra_env or {})}
         self.fleet = f"{scenario.name}-{uuid.uuid4().hex[:8]}"
         self.cameras = dict(cameras or {})  # agent name -> OpenCV video source replacing its synthetic camera
+        self.vehicle = vehicle
         self.children: list[Child] = []
         self.startup_s: dict[str, float] = {}
 
@@ -121,7 +128,7 @@ class Launcher:
     def _release(self) -> float | str:
         """Wait until the world and every agent are ready, then publish simulation time 0 (the epoch).
         Returns the epoch, or the failure status if a child died or never got ready."""
-        timed = [c for c in self.children if c.role != "observer"]
+        timed = [c for c in self.children if c.role in ("world", "agent")]  # autopilots need no epoch
         deadline = time.time() + READY_TIMEOUT_S
         while not all(self._ready_file(c.name).exists() for c in timed):
             for child in self.children:
@@ -154,11 +161,33 @@ class Launcher:
                                        "--scenario", str(scenario_file),
                                        "--duration", repr(sc.duration), "--out", str(self.run_dir)])
         for i in range(sc.agents):
+            mavlink = self._start_autopilot(i) if self.vehicle == "mavlink" else []
             self._spawn(f"uav{i}", "agent", [
                 "-m", "agent", "--id", f"uav{i}", "--index", str(i), "--scenario", str(scenario_file),
                 "--seed", str(sc.seed * 1000 + i), "--out", str(self.run_dir), *common, *timing(f"uav{i}"),
-                *(["--camera", str(self.cameras[f"uav{i}"])] if f"uav{i}" in self.cameras else []),
+                *(["--camera", str(self.cameras[f"uav{i}"])] if f"uav{i}" in self.cameras else []), *mavlink,
             ])
+
+    def _start_autopilot(self, index: int) -> list[str]:
+        """Start ``skymesh autopilot`` for agent ``index`` (PX4 SITL's conventions on free loopback ports; the
+        scenario's vehicle, origin and the agent's start position), and return the agent's ``--mavlink`` options:
+        the agent listens where the autopilot sends its offboard link."""
+        from mesh_sim.autopilot.process import free_udp_ports
+
+        sc = self.scenario.agent
+        offboard, listen, gcs, gcs_remote = free_udp_ports(4)
+        vehicle = dict(sc.vehicle)
+        north, east, _ = sc.start_position(index)
+        self._spawn(f"autopilot{index}", "autopilot", [
+            "-m", "mesh_sim.autopilot", "--instance", str(index), "--vehicle", str(vehicle.pop("kind")),
+            *(f"--vehicle-param={key}={value}" for key, value in vehicle.items()),
+            "--north", repr(float(north)), "--east", repr(float(east)), "--altitude", repr(float(sc.altitude)),
+            "--origin", ",".join(map(repr, sc.origin)),
+            "--offboard-port", str(offboard), "--offboard-remote-port", str(listen), "--gcs-port", str(gcs),
+            "--gcs-remote-port", str(gcs_remote), "--parent-pid", str(os.getpid()),
+            "--stats", str(self.run_dir / f"autopilot-uav{index}.json"),
+        ])
+        return ["--mavlink", f"udpin:127.0.0.1:{listen}"]
 
     def _spawn(self, name: str, role: str, args: list[str]) -> None:
         log_path = self.run_dir / "logs" / f"{name}.log"

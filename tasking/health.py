@@ -27,6 +27,10 @@ item 9) is the same linear ramp as :meth:`perception.quality.VideoQuality.weight
 
 so ``q = 1`` for clean video, ``q = 0`` (and the camera counts as failed) at or above the failure level.
 
+A real vehicle (:mod:`agent.vehicles.mavlink`) reports its battery and its failures; they replace the
+modelled fuel and failures (:meth:`VehicleHealth.observe_vehicle`, chosen here: the battery's remaining charge
+is the fuel, so the nominal burn rate turns it into flight time).
+
 Return to base (§2.7.5): a vehicle must go home when (a) its remaining flight time at the current burn
 rate, ``f / k``, no longer exceeds the time to fly home plus a reserve, or (b) its camera has failed.
 """
@@ -183,6 +187,17 @@ class VehicleHealth:
         """Take the agent's published D(t) and ``failed`` flag (§2.4): quality ``q`` and camera failure."""
         self.quality = camera_quality(video_quality, self.model)
         self.camera_failed = failed or video_quality >= self.model.camera_fail
+
+    def observe_vehicle(self, battery: float | None, failed: bool) -> None:
+        """What a real vehicle reports replaces the model: the remaining ``battery`` charge (0-1, ``None``:
+        not reported) is the fuel, ``fuel = battery · capacity``; a reported failure is a failure (the burn rate
+        becomes ``k_fuel,failure`` until the vehicle is repaired at base)."""
+        if battery is not None:
+            if not (math.isfinite(battery) and 0 <= battery <= 1):
+                raise ValueError(f"battery must be a fraction in [0, 1], got {battery}")
+            self.fuel = battery * self.model.capacity
+        if failed and not self.failed:
+            self.failed, self.failures = True, self.failures + 1
 
     def must_return(self, distance_home: float, speed: float, reserve: float = 0.0) -> bool:
         """§2.7.5: flight time ``f / k`` (current ``k``) ≤ time home + ``reserve`` [s], or a failed camera."""

@@ -43,8 +43,9 @@ class Sortie:
         self._last: float | None = None
 
     def update(self, t: float, position_ne, base_ne, video_quality: float | None = None,
-               camera_failed: bool = False) -> str:
-        """Advance the health to ``t`` and take this cycle's decision; returns the new state."""
+               camera_failed: bool = False, battery: float | None = None, failed: bool = False) -> str:
+        """Advance the health to ``t`` and take this cycle's decision; returns the new state. ``battery`` (0-1)
+        and ``failed``: what a real vehicle reports (:meth:`tasking.health.VehicleHealth.observe_vehicle`)."""
         dt = 0.0 if self._last is None else max(0.0, t - self._last)
         self._last = t
         if self.state == "lost":
@@ -52,6 +53,8 @@ class Sortie:
         if video_quality is not None:
             self.health.observe_camera(video_quality, camera_failed)
         self.health.step(dt, flying=self.state != "refuelling")
+        if battery is not None or failed:
+            self.health.observe_vehicle(battery, failed)
         if self.health.lost:
             self.state, self.lost_at = "lost", t
             return self.state

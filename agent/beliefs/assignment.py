@@ -82,15 +82,19 @@ class AssignmentExchange:
 
     def settle(self, t: float) -> None:
         """Rebuild the task set from the fused picture, update the sortie, and re-bid the bundle from where the
-        vehicle is (a vehicle that is not flying its sortie bids for nothing: its tasks go to others)."""
+        vehicle is. A vehicle that is not flying its sortie, or not healthy (a MAVLink vehicle that lost its
+        autopilot, or whose autopilot took over), bids for nothing: its tasks go to others. A vehicle that
+        reports its battery and failures has them stand in for the health model's fuel and failures."""
         self.tasks = fleet_tasks(self.views["track"].positions, self.searches, self.config)
         position = self.vehicle.state().position[:2]
         serving = self.cbba.path[0] if self.cbba.path else None
         if self.sortie is None:
             me, bidding = Capability(position, self.config.cruise_speed, self.base), True
         else:
-            state = self.sortie.update(t, position, self.base, self._video)
+            state = self.sortie.update(t, position, self.base, self._video, battery=self.vehicle.battery,
+                                       failed=self.vehicle.failed)
             me, bidding = self.sortie.capability(position, self.base), state == "flying"
+        bidding = bidding and self.vehicle.healthy
         self.cbba.rebuild(self.tasks if bidding else {}, path_score(me, self.config.discount))
         if (self.cbba.path[0] if self.cbba.path else None) != serving:
             self.changes += 1

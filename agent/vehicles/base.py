@@ -1,9 +1,11 @@
 """The vehicle interface, and what the kinematic models share (orbit guidance, sub-stepping, config keys).
 
 An agent reads the vehicle state, and sends it a setpoint, every cycle (DESIGN §4). The kinematic
-models (:mod:`agent.vehicles.multirotor`, :mod:`agent.vehicles.fixed_wing`) stand in for the MAVLink
-vehicle, which will implement the same :class:`Vehicle` protocol (its ``step`` will only poll the link:
-the real vehicle moves on its own clock).
+models (:mod:`agent.vehicles.multirotor`, :mod:`agent.vehicles.fixed_wing`) simulate a vehicle; the MAVLink
+vehicle (:mod:`agent.vehicles.mavlink`) implements the same :class:`Vehicle` protocol for a real autopilot
+(its ``step`` does not wait: the real vehicle moves on its own clock). A real vehicle can lose its
+autopilot: its state then says the pose is stale (``fresh``) and the vehicle itself that it is not
+``healthy``; a simulated one is always both.
 
 Frames and units (DESIGN §3): local NED, x north, y east, z **down**, metres, seconds, radians.
 ``yaw`` is the heading from north towards east; ``roll`` and ``pitch`` are FRD body angles (roll
@@ -44,7 +46,9 @@ def wrap_angle(angle: float) -> float:
 
 @dataclass(frozen=True)
 class VehicleState:
-    """Vehicle state at time ``t``: NED ``position`` and ``velocity`` (3,), ``yaw``, ``roll``, ``pitch`` (rad)."""
+    """Vehicle state at time ``t``: NED ``position`` and ``velocity`` (3,), ``yaw``, ``roll``, ``pitch`` (rad).
+    ``fresh``: the pose is current (``False``: the vehicle lost its autopilot and this is the last pose it had,
+    which must not georeference a measurement)."""
 
     t: float
     position: np.ndarray
@@ -52,6 +56,7 @@ class VehicleState:
     yaw: float
     roll: float
     pitch: float
+    fresh: bool = True
 
 
 @dataclass(frozen=True)
@@ -89,15 +94,34 @@ class Setpoint:
             object.__setattr__(self, "velocity", as_vector(self.velocity, "setpoint velocity", 2))
 
 
+class VehicleError(RuntimeError):
+    """A real vehicle cannot be reached or refuses what it is asked (the MAVLink vehicle's errors derive from it):
+    ``python -m agent`` stops with exit code 2 before the agent runs."""
+
+
 @runtime_checkable
 class Vehicle(Protocol):
-    """What the agent needs from a vehicle (kinematic model or MAVLink)."""
+    """What the agent needs from a vehicle (kinematic model or MAVLink).
+
+    ``healthy``: flying the agent's setpoints (``False``: the autopilot is lost, took over, or the battery is
+    low; tasking then gives its tasks to others). ``battery``: remaining charge 0-1, ``None`` when unknown (a
+    simulated vehicle: the health model's fuel stands in). ``failed``: the vehicle reports a failure.
+    ``point(look_at)``: the planner's gimbal command (``Goal.look_at``, NED, or ``None``), as the sensors get it:
+    a real vehicle's gimbal points there; a simulated one has none (a camera sensor steers its own)."""
+
+    healthy: bool
+    battery: float | None
+    failed: bool
 
     def state(self) -> VehicleState: ...
+
+    def point(self, look_at) -> None: ...
 
     def set_setpoint(self, setpoint: Setpoint) -> None: ...
 
     def step(self, dt: float) -> None: ...
+
+    def close(self) -> None: ...
 
 
 def goal_to_setpoint(goal: Goal) -> Setpoint:
@@ -132,10 +156,19 @@ class KinematicModel(ABC):
 
     _setpoint: Setpoint
     _t: float
+    healthy = True  # a simulated vehicle never loses its autopilot
+    battery = None  # nor reports a battery (the health model's fuel stands in)
+    failed = False
+
+    def point(self, look_at) -> None:  # noqa: B027 - no gimbal: a simulated camera steers itself (Sensor.point)
+        """No gimbal on a kinematic model."""
 
     @property
     def setpoint(self) -> Setpoint:
         return self._setpoint
+
+    def close(self) -> None:  # noqa: B027 - a simulated vehicle holds nothing to release
+        """Nothing to release."""
 
     @abstractmethod
     def state(self) -> VehicleState: ...

@@ -71,17 +71,18 @@ class Outcome:
 
 class FlightController:
     def __init__(self, model: KinematicModel, params: Params, battery: Battery, gimbal: Gimbal,
-                 position_valid_after: float = 1.5):
+                 position_valid_after: float = 1.5, airborne: bool = False):
+        """``airborne``: the model starts in the air, armed and holding there (home on the ground below) —
+        a fleet run's counterpart of the kinematic models' start at altitude; PX4 SITL always boots landed."""
         self.model = model
         self.params = params
         self.battery = battery
         self.gimbal = gimbal
         self.position_valid_after = position_valid_after  # s after boot; chosen here (EKF2 GPS fusion start)
         self.t = 0.0
-        self.armed = False
-        self.airborne = False
+        self.armed = self.airborne = airborne
         self.main_mode, self.sub_mode = PX4_MAIN_AUTO, PX4_AUTO_LOITER
-        self.home = self.position.copy()
+        self.home = self.position * np.array([1.0, 1.0, 0.0])  # on the ground below the start
         self.offboard: OffboardTarget | None = None
         self.statustexts: list[tuple[int, str]] = []  # (MAV_SEVERITY, text) not yet sent
         self._target = self.position.copy()  # the current mode's reference position

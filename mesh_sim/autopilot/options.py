@@ -34,6 +34,7 @@ class AutopilotOptions:
     north: float = 0.0  # start position [m] from the origin
     east: float = 0.0
     heading_deg: float = 0.0
+    altitude: float = 0.0  # start height [m] above the origin; > 0: in the air, armed, holding (not PX4 SITL's way)
     origin: tuple[float, float, float] = DEFAULT_ORIGIN
     host: str = "127.0.0.1"  # where the remote ends are, and the address the local ports bind
     offboard_port: int | None = None  # None: 14580 + instance
@@ -124,6 +125,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--north", type=float, default=0.0, help="start position north of the origin [m]")
     parser.add_argument("--east", type=float, default=0.0, help="start position east of the origin [m]")
     parser.add_argument("--heading", type=float, default=0.0, dest="heading_deg", help="start heading [deg]")
+    parser.add_argument("--altitude", type=_non_negative, default=0.0,
+                        help="start this high [m], armed and holding (default 0: on the ground, as PX4 SITL boots); "
+                             "skymesh run --vehicle mavlink starts at the scenario's altitude, as its kinematic runs")
     parser.add_argument("--origin", type=_origin, default=DEFAULT_ORIGIN, metavar="LAT,LON,ALT",
                         help="NED origin and GPS_GLOBAL_ORIGIN (default: skymesh's default scenario origin)")
     parser.add_argument("--host", default="127.0.0.1", help="address to bind and to send to (default 127.0.0.1)")

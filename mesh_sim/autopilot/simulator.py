@@ -44,11 +44,12 @@ class Simulator:
         self.options = options
         sysid = options.system_id
         model = vehicle_from_config({"kind": options.vehicle, **dict(options.vehicle_params)},
-                                    [options.north, options.east, 0.0],
+                                    [options.north, options.east, -options.altitude],
                                     math.radians(options.heading_deg))
         self.params = Params(MAV_SYS_ID=sysid, MAV_TYPE=VEHICLE_TYPES[options.vehicle])
         battery = Battery(flight_time=options.flight_time, remaining=options.battery)
-        self.controller = FlightController(model, self.params, battery, Gimbal(), options.position_valid_after)
+        self.controller = FlightController(model, self.params, battery, Gimbal(), options.position_valid_after,
+                                           airborne=options.altitude > 0)
         self.telemetry = Telemetry(self.controller, options.origin, sysid, VEHICLE_TYPES[options.vehicle])
         self.counters = Counters()
         self.router = MessageRouter(self.controller, self.telemetry, self.params, self.counters)

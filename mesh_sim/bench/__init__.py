@@ -151,6 +151,12 @@ BENCHMARKS: dict[str, Benchmark] = {
             "round trip, telemetry rates achieved vs requested, CPU per simulator process",
         ),
         Benchmark(
+            "mavlink-fleet",
+            "mesh_sim.bench.mavlink_fleet",
+            "the default scenario live over MAVLink (a skymesh autopilot per agent) vs the kinematic run of the same "
+            "seed (fleet ÷ oracle, CPU per step), and one autopilot frozen: detection and reassignment times",
+        ),
+        Benchmark(
             "particles",
             "mesh_sim.bench.particles",
             "particle fusion (Merino Alg. 5.2 GMM and Alg. 5.3 LOP) time and accuracy vs particle count 200/500/2000",

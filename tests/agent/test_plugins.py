@@ -79,7 +79,7 @@ def test_every_registered_sensor_is_a_sensor(kind):
     sensor.close()
 
 
-@pytest.mark.parametrize("kind", sorted(VEHICLES))
+@pytest.mark.parametrize("kind", sorted(set(VEHICLES) - {"mavlink"}))  # it needs an autopilot: test_mavlink_vehicle
 def test_every_registered_vehicle_is_a_vehicle(kind):
     assert_implements(VEHICLES[kind]({}, [0.0, 0.0, -50.0], 0.0), Vehicle)
 

@@ -223,3 +223,17 @@ def test_landed_state_follows_an_offboard_descent_to_the_ground():
     assert c.landed_state == mavlink.MAV_LANDED_STATE_LANDING
     run(c, c.t + 10.0, feed=lambda t: c.set_offboard_target(position_target(c, [0.0, 0.0, 0.0])))
     assert c.landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND and not c.airborne
+
+
+def test_a_vehicle_started_in_the_air_is_armed_and_holds_there():
+    """--altitude: a fleet run's autopilots start where the kinematic models do, in the air, armed and holding;
+    home is the ground below."""
+    model = vehicle_from_config({"kind": "multirotor"}, [10.0, -20.0, -80.0])
+    c = FlightController(model, Params(), Battery(), Gimbal(), airborne=True)
+    assert c.armed and c.custom_mode == PX4_HOLD
+    assert c.landed_state == mavlink.MAV_LANDED_STATE_IN_AIR
+    assert c.home.tolist() == [10.0, -20.0, 0.0]
+    run(c, 5.0)
+    assert c.position == pytest.approx([10.0, -20.0, -80.0], abs=1e-6)
+    c.set_offboard_target(position_target(c, [30.0, -20.0, -80.0]))
+    assert c.start_offboard().result == mavlink.MAV_RESULT_ACCEPTED  # no arming, no take-off: straight on
