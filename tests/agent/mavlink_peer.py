@@ -106,7 +106,7 @@ class ScriptedAutopilot:
         self.drop_acks: dict[int, int] = defaultdict(int)  # command -> acks still to lose
         self.silent = threading.Event()  # set: the autopilot says nothing (a lost link)
         self.received: dict[str, list[tuple[float, object]]] = defaultdict(list)  # type -> [(arrival, msg)]
-        self.last_heartbeat_sent = 0.0
+        self.last_heartbeat_sent = self.last_pose_sent = 0.0
         self._created = time.monotonic() - boot_offset
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="scripted autopilot", daemon=True)
@@ -184,6 +184,7 @@ class ScriptedAutopilot:
     def _send_pose(self) -> None:
         t = self.boot_ms()
         self.mav.local_position_ned_send(t, *self.position, *self.velocity)
+        self.last_pose_sent = time.monotonic()
         self.mav.attitude_send(t, 0.01, -0.02, 0.3, 0.0, 0.0, 0.0)
 
     def _send_status(self) -> None:

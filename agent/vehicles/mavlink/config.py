@@ -17,7 +17,9 @@ key                default                 meaning
                                            kinematic multirotor flies them (v²/r within the limit)
 ``setpoint_rate_hz`` 10.0                  SET_POSITION_TARGET_LOCAL_NED stream rate (PX4 leaves OFFBOARD
                                            below 2 Hz: PX4 user guide, "Offboard Mode")
-``heartbeat_timeout`` 2.0                  s without an autopilot HEARTBEAT (or a position) = link lost
+``heartbeat_timeout`` 2.0                  s without an autopilot HEARTBEAT = link lost (issue 14: > 2 s)
+``stream_timeout`` 1.0                     s without a LOCAL_POSITION_NED (requested at 30 Hz: ~30 missed) =
+                                           the pose is stale and the link presumed lost
 ``connect_timeout`` 10.0                   s to wait for the first autopilot HEARTBEAT
 ``position_timeout`` 30.0                  s to wait for a position and the local frame's origin
 ``command_timeout`` 1.0                    s to wait for a COMMAND_ACK before sending the command again
@@ -50,6 +52,7 @@ class MavlinkConfig:
     max_accel: float = 3.0
     setpoint_rate_hz: float = 10.0
     heartbeat_timeout: float = 2.0
+    stream_timeout: float = 1.0
     connect_timeout: float = 10.0
     position_timeout: float = 30.0
     command_timeout: float = 1.0
@@ -72,7 +75,7 @@ class MavlinkConfig:
                 or not 1 <= self.component_id <= 255:
             raise ValueError(f"component_id: must be an integer in [1, 255], got {self.component_id!r}")
         for name in ("takeoff_altitude", "cruise_speed", "max_accel", "setpoint_rate_hz", "heartbeat_timeout",
-                     "connect_timeout", "position_timeout", "command_timeout", "max_message_rate"):
+                     "stream_timeout", "connect_timeout", "position_timeout", "command_timeout", "max_message_rate"):
             try:
                 positive(name, getattr(self, name))
             except ValueError as error:

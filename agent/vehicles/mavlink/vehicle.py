@@ -8,18 +8,19 @@ the position known, and the vehicle armed, in OFFBOARD (PX4) or GUIDED (ArduPilo
 * :meth:`state` is the latest LOCAL_POSITION_NED and attitude, mapped into the scenario's NED frame
   (:class:`~agent.vehicles.mavlink.frames.FrameMap`), stamped with the autopilot's time on the local (Unix)
   clock (:class:`~agent.vehicles.mavlink.clock.BootClock`, exposed as :attr:`clock`), and ``fresh = False``
-  once the position or the autopilot's heartbeat is older than ``heartbeat_timeout`` — the agent does not sense
-  with a stale pose;
+  once the position is older than ``stream_timeout`` or the autopilot's heartbeat older than ``heartbeat_timeout``
+  — the agent does not sense with a stale pose;
 * :meth:`set_setpoint` replaces the setpoint that the link's thread streams as SET_POSITION_TARGET_LOCAL_NED
   at ``setpoint_rate_hz``: the position and velocity of a reference that flies the setpoint
   (:mod:`agent.vehicles.mavlink.guidance`), which the autopilot tracks (velocity as feed-forward);
 * :meth:`step` does not wait: the real vehicle moves on its own clock. It watches the health (below) and
   counts the steps spent with a stale pose;
-* :attr:`healthy` is ``False``, with :attr:`health_reason`, when the autopilot's heartbeat or position is older
-  than ``heartbeat_timeout``, the autopilot is disarmed or left the commanded mode (a pilot or a failsafe took
-  over), the take-off is not over, or the battery is below ``battery_reserve``. An unhealthy vehicle bids for no
-  task (:class:`agent.beliefs.assignment.AssignmentExchange`), so the fleet's consensus gives its tasks to others;
-  :attr:`battery` and :attr:`failed` feed the assignment's health model;
+* :attr:`healthy` is ``False``, with :attr:`health_reason`, when the autopilot's heartbeat is older than
+  ``heartbeat_timeout`` or its position stream older than ``stream_timeout`` (a position streamed at tens of Hz that
+  stops says the link dropped long before the 1 Hz heartbeat can), the autopilot is disarmed or left the commanded
+  mode (a pilot or a failsafe took over), the take-off is not over, or the battery is below ``battery_reserve``. An
+  unhealthy vehicle bids for no task (:class:`agent.beliefs.assignment.AssignmentExchange`), so the fleet's
+  consensus gives its tasks to others; :attr:`battery` and :attr:`failed` feed the assignment's health model;
 * :meth:`point` points the camera with the gimbal protocol v2, :meth:`gimbal_attitude` reads it back.
 
 Closing it stops the stream: the autopilot's own offboard-loss failsafe (PX4 ``COM_OBL_RC_ACT``, ArduPilot
@@ -115,12 +116,13 @@ class MavlinkVehicle:
             position=frames.position_to_scenario(local.position),
             velocity=frames.vector_to_scenario(local.velocity),
             yaw=wrap_angle(yaw + frames.yaw_offset), roll=roll, pitch=pitch,
-            fresh=self._alive(local) and self._alive(self.telemetry.heartbeat),
+            fresh=self._alive(local, self.config.stream_timeout) and self._alive(self.telemetry.heartbeat),
         )
 
-    def _alive(self, record) -> bool:
-        """``record`` (a position, a heartbeat) arrived within ``heartbeat_timeout``."""
-        return record is not None and time.monotonic() - record.arrival <= self.config.heartbeat_timeout
+    def _alive(self, record, timeout: float | None = None) -> bool:
+        """``record`` (a position, a heartbeat) arrived within ``timeout`` (default ``heartbeat_timeout``)."""
+        timeout = self.config.heartbeat_timeout if timeout is None else timeout
+        return record is not None and time.monotonic() - record.arrival <= timeout
 
     def set_setpoint(self, setpoint: Setpoint) -> None:
         if not isinstance(setpoint, Setpoint):
@@ -150,8 +152,8 @@ class MavlinkVehicle:
         heartbeat = telemetry.heartbeat
         if not self._alive(heartbeat):
             return f"autopilot heartbeat lost (none for over {self.config.heartbeat_timeout:g} s)"
-        if not self._alive(telemetry.local):
-            return "position stale"
+        if not self._alive(telemetry.local, self.config.stream_timeout):
+            return f"position stale (none for over {self.config.stream_timeout:g} s)"
         if not heartbeat.armed:
             return "disarmed"
         if self._mode is not None and self.mode_of(heartbeat.custom_mode) != self._mode:
