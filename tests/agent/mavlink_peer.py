@@ -81,7 +81,7 @@ class ScriptedAutopilot:
 
     def __init__(self, port: int, *, system: int = 1, autopilot: int = mavlink.MAV_AUTOPILOT_PX4,
                  origin=ORIGIN, start=(0.0, 0.0, 0.0), boot_offset: float = 100.0, battery: int = 80,
-                 answer_timesync: bool = True, tcp: bool = False):
+                 answer_timesync: bool = True, tcp: bool = False, home_after: float = 0.0):
         self.tcp = tcp
         self.socket = socket.socket(socket.AF_INET, socket.SOCK_STREAM if tcp else socket.SOCK_DGRAM)
         self.socket.bind(("127.0.0.1", port if tcp else 0))
@@ -100,6 +100,7 @@ class ScriptedAutopilot:
         self.armed, self.custom_mode = False, PX4_HOLD if autopilot == mavlink.MAV_AUTOPILOT_PX4 else 0
         self.battery, self.fault = battery, 0
         self.answer_timesync = answer_timesync
+        self.home_after = home_after  # s after creation before HOME_POSITION requests are answered (no position yet)
         self.gimbal_q = [1.0, 0.0, 0.0, 0.0]
         self.target: tuple[np.ndarray, np.ndarray] | None = None  # last setpoint (position, velocity), local
         self.refuse: dict[int, int] = {}  # command -> MAV_RESULT to answer
@@ -108,6 +109,7 @@ class ScriptedAutopilot:
         self.received: dict[str, list[tuple[float, object]]] = defaultdict(list)  # type -> [(arrival, msg)]
         self.last_heartbeat_sent = self.last_pose_sent = 0.0
         self._created = time.monotonic() - boot_offset
+        self.boot_offset = boot_offset
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="scripted autopilot", daemon=True)
         self._thread.start()
@@ -260,7 +262,8 @@ class ScriptedAutopilot:
         elif msg.command == mavlink.MAV_CMD_REQUEST_MESSAGE:
             if int(msg.param1) == mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN:
                 self._send_origin()
-            elif int(msg.param1) == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
+            elif int(msg.param1) == mavlink.MAVLINK_MSG_ID_HOME_POSITION and \
+                    time.monotonic() - self._created - self.boot_offset >= self.home_after:
                 self._send_home()
 
     def _on_set_position_target_local_ned(self, msg) -> None:

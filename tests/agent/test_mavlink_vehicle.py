@@ -132,6 +132,24 @@ def test_a_vehicle_already_flying_is_not_armed_again_and_keeps_its_altitude():
         airborne.close()
 
 
+def test_a_flying_vehicle_whose_home_arrives_late_is_not_kept_taking_off():
+    """The home is not known when the start-up begins (the autopilot answers HOME_POSITION requests only 2 s
+    later): the climb is judged against home as it arrives, so the vehicle, 30 m up, is healthy once it does, even
+    after the agent's own setpoint replaced the climb point (skymesh run --vehicle mavlink found agents stuck)."""
+    airborne = ScriptedAutopilot(free_port(), start=(5.0, 5.0, -30.0), home_after=2.0)
+    airborne.armed, airborne.home = True, np.zeros(3)
+    try:
+        vehicle = connect(airborne)
+        try:
+            vehicle.set_setpoint(Setpoint(vehicle.state().position))  # hold where it is: no climb
+            wait_for(lambda: vehicle.healthy, timeout=6.0)
+            assert vehicle.telemetry.home is not None
+        finally:
+            vehicle.close()
+    finally:
+        airborne.close()
+
+
 def test_a_denied_arm_command_is_a_clear_error(peer):
     peer.refuse[mavlink.MAV_CMD_COMPONENT_ARM_DISARM] = mavlink.MAV_RESULT_DENIED
     with pytest.raises(CommandRefused, match="MAV_CMD_COMPONENT_ARM_DISARM: refused by the autopilot "

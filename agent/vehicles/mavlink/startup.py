@@ -65,17 +65,20 @@ def request_streams(commander) -> None:
 
 
 def wait_for_position(vehicle) -> None:
-    """Until the vehicle knows where it is in the scenario's frame (step 2 of the module docstring); the origin
-    and home are asked for again every :data:`ASK_AGAIN` seconds (an autopilot without a GPS fix has neither)."""
+    """Until the vehicle knows where it is in the scenario's frame and where its home is (step 2 of the module
+    docstring: the take-off is judged against home, so a vehicle restarted in the air is not climbed again); the
+    origin and home are asked for again every :data:`ASK_AGAIN` seconds (an autopilot without a GPS fix has
+    neither, and our simulator, like PX4, none before its position is valid)."""
     deadline = time.monotonic() + vehicle.config.position_timeout
 
     def located() -> bool:
-        return vehicle.telemetry.local is not None and vehicle.frames() is not None
+        telemetry = vehicle.telemetry
+        return telemetry.local is not None and vehicle.frames() is not None and telemetry.home is not None
 
     while not located():
         if time.monotonic() > deadline:
             raise LinkError(f"timed out after {vehicle.config.position_timeout:g} s waiting for a local position "
-                            f"and its origin (GPS_GLOBAL_ORIGIN or HOME_POSITION)")
+                            f", its origin (GPS_GLOBAL_ORIGIN or HOME_POSITION) and home (HOME_POSITION)")
         for message in (mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, mavlink.MAVLINK_MSG_ID_HOME_POSITION):
             try:
                 vehicle.commander.run(mavlink.MAV_CMD_REQUEST_MESSAGE, message)

@@ -204,17 +204,24 @@ class MavlinkVehicle:
     def begin_takeoff(self, stream_during_climb: bool) -> None:
         """Climb to ``takeoff_altitude`` above home over the current position (a vehicle already higher holds its
         altitude), then hold there until the agent sends a setpoint; with ``stream_during_climb`` the climb point is
-        streamed (PX4 takes off in OFFBOARD)."""
+        streamed (PX4 takes off in OFFBOARD). Before HOME_POSITION has arrived, home is taken to be where the
+        vehicle is; the end of the climb is judged against home as known at each check (:meth:`_climbing`), so a
+        vehicle restarted in the air is not kept "taking off" when its home arrives a moment later."""
         local, frames = self.telemetry.local, self.frames()
-        home_z = self.telemetry.home[1][2] if self.telemetry.home is not None else local.position[2]
+        home_z = self._home_z(local.position[2])
         top = np.array([*local.position[:2], min(local.position[2], home_z - self.config.takeoff_altitude)])
         self._setpoint = Setpoint(frames.position_to_scenario(top))
-        self._takeoff = (home_z - TAKEOFF_DONE * self.config.takeoff_altitude, stream_during_climb)
+        self._takeoff = (local.position[2], stream_during_climb)
+
+    def _home_z(self, fallback: float) -> float:
+        """Home's local depth (HOME_POSITION), ``fallback`` before it arrived."""
+        return self.telemetry.home[1][2] if self.telemetry.home is not None else fallback
 
     def _climbing(self) -> bool:
-        """Whether the take-off is still going on (ends it once the vehicle is high enough)."""
+        """Whether the take-off is still going on (ends it once the vehicle is high enough above home)."""
         takeoff, local = self._takeoff, self.telemetry.local
-        if takeoff is not None and local.position[2] <= takeoff[0]:
+        if takeoff is not None and local.position[2] <= self._home_z(takeoff[0]) - TAKEOFF_DONE * \
+                self.config.takeoff_altitude:
             self._takeoff = takeoff = None
         return takeoff is not None
 
