@@ -76,7 +76,8 @@ class StandoffPilot:
         self._target: str | None = None
         self._next_request = 0.0
         self.requested = self.adopted = self.late = self.failed = 0
-        self.replannings: list[Replanning] = []
+        self.replannings: list[Replanning] = []  # adopted or failed, in order
+        self.late_replannings: list[Replanning] = []  # finished after their adoption instant (live)
 
     def goal(self, t: float, state, target: str, mean, velocity) -> Goal | None:
         """The goal at simulation time ``t`` for ``target`` (mean (north, east), velocity (north, east)) from the
@@ -117,13 +118,19 @@ class StandoffPilot:
         try:
             replanning = future.result(timeout=self.wait)
         except FutureTimeout:
-            self.late += 1  # keep the old plan; the solve finishes in the background and is forgotten
+            self.late += 1  # keep the old plan; the solve finishes in the background, timed but not flown
+            future.add_done_callback(self._timed)
             return
         self.replannings.append(replanning)
         if self.planner.adopt(replanning):
             self.adopted += 1
         else:
             self.failed += 1
+
+    def _timed(self, future: Future) -> None:
+        """A late solve's times, from the worker when it ends (a list append is atomic under the GIL)."""
+        if not future.cancelled() and future.exception() is None:
+            self.late_replannings.append(future.result())
 
     def _drop(self) -> None:
         if self._pending is not None:
@@ -137,9 +144,9 @@ class StandoffPilot:
 
     def metrics(self) -> dict:
         """Replannings requested, adopted (a successful plan taken), failed (no solve succeeded), late (not done at
-        the adoption instant, live), and the replannings' wall and thread-CPU times (median, p95) [ms]."""
-        walls = [1e3 * r.wall for r in self.replannings]
-        cpus = [1e3 * r.cpu for r in self.replannings]
+        the adoption instant, live), and the wall and thread-CPU times (median, p95) [ms] of every finished one."""
+        timed = self.replannings + self.late_replannings
+        walls, cpus = [1e3 * r.wall for r in timed], [1e3 * r.cpu for r in timed]
         return {"requested": self.requested, "adopted": self.adopted, "failed": self.failed, "late": self.late,
                 "solve_ms_median": _percentile(walls, 50), "solve_ms_p95": _percentile(walls, 95),
                 "solve_cpu_ms_median": _percentile(cpus, 50), "solve_cpu_ms_p95": _percentile(cpus, 95),
