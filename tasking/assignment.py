@@ -12,7 +12,9 @@ cell is swept by a boustrophedon of ``spacing`` (:func:`tasking.search.lawnmower
 it was left; ``home`` flies to the base; with no task the vehicle holds an orbit where it is. Whatever the
 task, a peer closer than the separation layer's reach turns the goal into a point along the separated
 velocity (:class:`tasking.separation.SeparationLayer`, thesis 000 §2.9), so that no two vehicles come
-closer than ``min_separation``.
+closer than ``min_separation``. With ``standoff = "collocation"`` a track task served alone is flown instead on
+Ross et al.'s receding-horizon collocation plan about the target (spec 002 §2.7, :mod:`tasking.standoff`; the
+plans are adopted ``adopt_after`` seconds after their request, every 2 s).
 
 **Shared orbits** (``orbit_slots`` = k > 1; spec 004 §2.8-2.9): every track is k tasks, its *slots*
 ``track:<id>`` and ``track:<id>#1`` ... ``#k-1``, of values ``track_value / (s + 1)`` for slot s (each further
