@@ -15,15 +15,15 @@ meanwhile the vehicle flies the previous plan. At the adoption instant the plann
 (``wait = None``) it waits for it however long it takes, so the flown path depends on simulation time only and
 two runs are identical whatever the thread timing. Live, the solve normally finished long before (``adopt_after``
 exceeds the 0.5 s budget); one that has not is waited for at most ``wait`` wall seconds, then counted ``late``
-and dropped, the old plan kept — the agent's 5 Hz deadline outranks a late plan. Lockstep and live thus fly the
-same rule; only the clock differs (DESIGN §4). One worker per agent (the solves of one agent never overlap:
-a replanning requested while the previous one is still running waits behind it); :meth:`StandoffPilot.close`
-stops it (the agent's ``close``), so no thread outlives its agent.
+and dropped, the old plan kept — the agent's 5 Hz deadline outranks a late plan; while that solve still runs
+no new one is requested (``skipped``: queued behind it, every later plan would be late too). Lockstep and live
+thus fly the same rule; only the clock differs (DESIGN §4). One worker per agent (the solves of one agent never
+overlap); :meth:`StandoffPilot.close` stops it (the agent's ``close``), so no thread outlives its agent.
 
 The GIL: SLSQP's objective and constraints are numpy in Python, so the worker holds the GIL for much of a solve;
 the interpreter hands it back to the agent's loop every ``sys.getswitchinterval()`` (5 ms), so a step overlapping
-a solve is slowed but not blocked (measured in the README). Run SLSQP's BLAS on one thread (see
-:mod:`tasking.collocation`).
+a solve is slowed but not blocked (measured in the README). SLSQP's BLAS should run on one thread (see
+:mod:`tasking.collocation`; the launcher starts its agents with ``OPENBLAS_NUM_THREADS=1``).
 
 Chosen here: ``adopt_after`` 0.6 s (the 0.5 s budget plus a step), ``wait`` 0.05 s live (a quarter of a 5 Hz
 step), the fixed wing's speed band ±5 % (the kinematic fixed wing holds its airspeed), the footprint radius
@@ -36,6 +36,7 @@ import math
 from collections.abc import Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
+from concurrent.futures import wait as wait_for
 
 import numpy as np
 
@@ -73,9 +74,10 @@ class StandoffPilot:
         self.adopt_after, self.wait = adopt_after, wait
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="standoff")
         self._pending: tuple[float, Future] | None = None  # (adoption time, solve)
+        self._last: Future | None = None  # the latest solve submitted
         self._target: str | None = None
         self._next_request = 0.0
-        self.requested = self.adopted = self.late = self.failed = 0
+        self.requested = self.adopted = self.late = self.failed = self.skipped = 0
         self.replannings: list[Replanning] = []  # adopted or failed, in order
         self.late_replannings: list[Replanning] = []  # finished after their adoption instant (live)
 
@@ -105,11 +107,14 @@ class StandoffPilot:
         self._drop()
 
     def _request(self, t: float, state, mean, velocity) -> None:
+        self._next_request = t + self.planner.replan_period
+        if self._last is not None and not self._last.done():
+            self.skipped += 1  # live: a late solve still holds the worker; queueing behind it would cascade
+            return
         x = unicycle_state(state.position, state.velocity, float(getattr(state, "yaw", 0.0)))
         mean, velocity = np.array(mean, float)[:2], np.array(velocity, float)[:2]
         future = self._worker.submit(self.planner.solve, t, x, mean, velocity, self.planner.plan)
-        self._pending = (t + self.adopt_after, future)
-        self._next_request = t + self.planner.replan_period
+        self._pending, self._last = (t + self.adopt_after, future), future
         self.requested += 1
 
     def _adopt(self) -> None:
@@ -133,9 +138,13 @@ class StandoffPilot:
             self.late_replannings.append(future.result())
 
     def _drop(self) -> None:
+        """Forget the pending solve; in lockstep (``wait = None``) wait for it to end if it cannot be cancelled, so
+        that the worker is free at the next request whatever the thread timing."""
         if self._pending is not None:
-            self._pending[1].cancel()
+            future = self._pending[1]
             self._pending = None
+            if not future.cancel() and self.wait is None:
+                wait_for([future])
 
     def close(self) -> None:
         """Stop the worker (a solve under way is finished first: SLSQP cannot be interrupted)."""
@@ -144,10 +153,12 @@ class StandoffPilot:
 
     def metrics(self) -> dict:
         """Replannings requested, adopted (a successful plan taken), failed (no solve succeeded), late (not done at
-        the adoption instant, live), and the wall and thread-CPU times (median, p95) [ms] of every finished one."""
+        the adoption instant, live), skipped (not requested: a late solve still running, live), and the wall and
+        thread-CPU times (median, p95) [ms] of every finished one."""
         timed = self.replannings + self.late_replannings
         walls, cpus = [1e3 * r.wall for r in timed], [1e3 * r.cpu for r in timed]
         return {"requested": self.requested, "adopted": self.adopted, "failed": self.failed, "late": self.late,
+                "skipped": self.skipped,
                 "solve_ms_median": _percentile(walls, 50), "solve_ms_p95": _percentile(walls, 95),
                 "solve_cpu_ms_median": _percentile(cpus, 50), "solve_cpu_ms_p95": _percentile(cpus, 95),
                 "solve_ms": walls, "solve_cpu_ms": cpus}

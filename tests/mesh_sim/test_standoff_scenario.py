@@ -4,11 +4,15 @@ compares them with the circle on the same seed."""
 
 from __future__ import annotations
 
+import random
+import time
+
 import pytest
 
 from mesh_sim.launcher import new_run_dir
 from mesh_sim.lockstep import run_lockstep
 from mesh_sim.scenario import load
+from tasking.collocation import RecedingHorizonPlanner
 
 DURATION = 30.0
 
@@ -37,7 +41,16 @@ def test_the_fixed_wings_track_both_targets_on_adopted_plans(collocation):
 
 
 @pytest.mark.slow
-def test_two_lockstep_runs_are_identical(collocation, tmp_path):
+def test_two_lockstep_runs_are_identical_however_slow_the_worker(collocation, tmp_path, monkeypatch):
+    """The second run's solves are delayed by random sleeps (0-0.3 s): the adopted plans, hence the paths and the
+    errors, must not change — they would if a plan were taken when its solve happened to finish."""
+    solve, rng = RecedingHorizonPlanner.solve, random.Random(7)
+
+    def slow(self, *args):
+        time.sleep(rng.uniform(0.0, 0.3))
+        return solve(self, *args)
+
+    monkeypatch.setattr(RecedingHorizonPlanner, "solve", slow)
     again = _run(tmp_path, "b")
     assert _fleet_rmse(again) == _fleet_rmse(collocation)  # exact: adoption does not depend on thread timing
     assert [a["standoff"]["adopted"] for a in again["agents"]] == [a["standoff"]["adopted"]

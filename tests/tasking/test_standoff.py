@@ -80,7 +80,7 @@ def test_the_plan_is_adopted_at_the_fixed_delay_and_its_setpoint_is_flown():
         pilot.close()
 
 
-def test_a_late_solve_keeps_the_old_plan_and_is_counted():
+def test_a_late_solve_keeps_the_old_plan_is_counted_and_holds_back_the_next_request():
     pilot = _pilot(wait=None)
     release = threading.Event()
     try:
@@ -95,6 +95,8 @@ def test_a_late_solve_keeps_the_old_plan_and_is_counted():
         goal = pilot.goal(2.6, _state(), "track:a", mean, still)
         assert pilot.late == 1 and pilot.planner.plan is first
         np.testing.assert_allclose(goal.position, first.sample(2.6)[:2].tolist() + [-60.0])
+        pilot.goal(4.0, _state(), "track:a", mean, still)  # the late solve still runs: no request queued behind it
+        assert pilot.skipped == 1 and pilot.requested == 2 and pilot._pending is None
     finally:
         release.set()
         pilot.close()
