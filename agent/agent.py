@@ -41,11 +41,11 @@ from tasking.registry import PlanningContext, planner_from_config
 log = logging.getLogger("skymesh.agent")
 
 class Agent:
-    """One agent of a fleet over ``transport`` (:class:`agent.plugins.Transport`). ``camera``: an open
-    external video source that replaces the synthetic camera; ``None`` uses the scenario's ``[sensor]``."""
+    """One agent of a fleet over ``transport`` (:class:`agent.plugins.Transport`). ``camera``: an open external video
+    source replacing the synthetic camera. ``lockstep``: no wall-clock deadline (the planner may await its solves)."""
 
     def __init__(self, agent_id: str, index: int, scenario: AgentScenario, transport, keys: Keys,
-                 seed: int, fleet_key: bytes | None = None, camera=None):
+                 seed: int, fleet_key: bytes | None = None, camera=None, lockstep: bool = False):
         self.id, self.index, self.scenario, self.keys, self.fleet_key = agent_id, index, scenario, keys, fleet_key
         self.terrain = terrain_from_config(scenario.terrain)
         self.vehicle = vehicle_from_config(scenario.vehicle, scenario.start_position(index), 0.0, scenario.origin)
@@ -66,7 +66,7 @@ class Agent:
         top_speed = getattr(self.vehicle, "max_speed", getattr(self.vehicle, "airspeed", None))
         self.planner = planner_from_config(scenario.tasking, PlanningContext(
             index, scenario.agents, scenario.area.as_tuple(), scenario.altitude, seed, frozenset(self.exchanges),
-            hints, scenario.step, top_speed))
+            hints, scenario.step, top_speed, scenario.vehicle, lockstep))
         self.kinds = wire.KINDS | frozenset(EXCHANGES)  # the wire's kinds and every registered belief kind
         self._now = 0.0
         self.radio = None if plan is None else RadioTransport(
@@ -117,9 +117,9 @@ class Agent:
         self.steps += 1
 
     def close(self) -> None:
-        """Release the sensors (an external camera) and the vehicle (a MAVLink link)."""
-        for part in (*self.sensors, self.vehicle):
-            part.close()
+        """Release the sensors (an external camera), the vehicle (a MAVLink link) and the planner (its threads)."""
+        for part in (*self.sensors, self.vehicle, self.planner):  # a planner's close() is optional
+            getattr(part, "close", lambda: None)()
 
     # -- receiving ------------------------------------------------------------------------------
     def receive(self, item: Incoming, t: float) -> None:

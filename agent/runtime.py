@@ -19,8 +19,10 @@ import resource
 import signal
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
 
 log = logging.getLogger("skymesh.runtime")
 
@@ -74,9 +76,13 @@ class LoopStats:
     deadline_misses: int = 0
     skipped_steps: int = 0
     cpu_s: float = 0.0
+    step_wall_s: list[float] = field(default_factory=list)  # wall time of each step (a thread's work included)
 
     def as_dict(self) -> dict:
+        walls = [1e3 * w for w in self.step_wall_s]
         return {
+            "step_wall_ms_median": float(np.median(walls)) if walls else None,
+            "step_wall_ms_p95": float(np.percentile(walls, 95)) if walls else None,
             "deadline_misses": self.deadline_misses,
             "skipped_steps": self.skipped_steps,
             "cpu_per_step_ms": 1e3 * self.cpu_s / self.steps if self.steps else None,
@@ -115,9 +121,10 @@ def run_steps(step_fn, clock: SimClock, dt: float, duration: float, stop: thread
         if not parent_alive(parent):
             log.error("parent process is gone; stopping")
             break
-        cpu = time.process_time()
+        cpu, wall = time.process_time(), time.perf_counter()
         step_fn(t)
         stats.cpu_s += time.process_time() - cpu
+        stats.step_wall_s.append(time.perf_counter() - wall)
         stats.steps += 1
         if time.time() > clock.wall(t + dt + phase):
             stats.deadline_misses += 1

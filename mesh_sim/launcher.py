@@ -90,7 +90,9 @@ class Launcher:
         self.speed = speed
         self.rerun = rerun
         self.console = console or Console(stderr=True)
-        self.env = {**os.environ, **(extra_env or {})}
+        # BLAS on one thread per process unless told otherwise: on a shared machine OpenBLAS's worker threads cost
+        # 5-10x per collocation solve (tasking.collocation) and the fleet's own matrices are small
+        self.env = {"OPENBLAS_NUM_THREADS": "1", **os.environ, **(extra_env or {})}
         self.fleet = f"{scenario.name}-{uuid.uuid4().hex[:8]}"
         self.cameras = dict(cameras or {})  # agent name -> OpenCV video source replacing its synthetic camera
         self.vehicle = vehicle

@@ -12,7 +12,9 @@ cell is swept by a boustrophedon of ``spacing`` (:func:`tasking.search.lawnmower
 it was left; ``home`` flies to the base; with no task the vehicle holds an orbit where it is. Whatever the
 task, a peer closer than the separation layer's reach turns the goal into a point along the separated
 velocity (:class:`tasking.separation.SeparationLayer`, thesis 000 §2.9), so that no two vehicles come
-closer than ``min_separation``.
+closer than ``min_separation``. With ``standoff = "collocation"`` a track task served alone is flown instead on
+Ross et al.'s receding-horizon collocation plan about the target (spec 002 §2.7, :mod:`tasking.standoff`; the
+plans are adopted ``adopt_after`` seconds after their request, every 2 s).
 
 **Shared orbits** (``orbit_slots`` = k > 1; spec 004 §2.8-2.9): every track is k tasks, its *slots*
 ``track:<id>`` and ``track:<id>#1`` ... ``#k-1``, of values ``track_value / (s + 1)`` for slot s (each further
@@ -47,11 +49,14 @@ from tasking.health import HealthModel
 from tasking.orbit import Goal, goto_goal, orbit_setpoint
 from tasking.search import Area, WaypointFollower, check_area, lawnmower_waypoints
 from tasking.separation import SeparationLayer
+from tasking.standoff import REPLAN_PERIOD, STANDOFFS, StandoffPilot
 from tasking.tasks import Task
 
 SEPARATION_LOOKAHEAD = 1.0  # s: a separated velocity becomes a goal this far ahead
 SLOT = "#"  # separates a track task's key from its slot number (slot 0 has none)
-OPTIONAL = frozenset({"min_separation", "flight_time", "failure_rate", "refuel_time", "reserve"})  # 0: off / none
+OPTIONAL = frozenset({"min_separation", "flight_time", "failure_rate", "refuel_time", "reserve",
+                      "adopt_after"})  # 0: off / none
+WORDS = {"standoff": STANDOFFS}  # the keys whose values are words, and the words they take
 
 @dataclass(frozen=True)
 class AssignmentConfig:
@@ -76,9 +81,16 @@ class AssignmentConfig:
     landing_radius: float = 5.0  # m from the base at which a returning vehicle lands
     period: float = 1.0  # s between bid broadcasts when nothing changed
     orbit_slots: int = 1  # vehicles that share one target's circle, equally spaced (spec 004 §2.8)
+    standoff: str = "circle"  # how a lone vehicle serves a track: the circle, or "collocation" (tasking.standoff)
+    adopt_after: float = 0.6  # s after its request at which a collocation replanning is adopted (tasking.standoff)
 
     def __post_init__(self):
+        for name, words in WORDS.items():
+            if getattr(self, name) not in words:
+                raise ValueError(f"tasking.{name} must be one of {list(words)}, got {getattr(self, name)!r}")
         for f in fields(self):
+            if f.name in WORDS:
+                continue
             value = getattr(self, f.name)
             bad = isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value)
             if bad or value < 0 or (value == 0 and f.name not in OPTIONAL):
@@ -92,6 +104,9 @@ class AssignmentConfig:
             raise ValueError(f"tasking.stickiness must be ≥ 1, got {self.stickiness}")
         if self.failure_burn <= 1:
             raise ValueError(f"tasking.failure_burn must be > 1 (a failure burns faster), got {self.failure_burn}")
+        if self.adopt_after >= REPLAN_PERIOD:
+            raise ValueError(f"tasking.adopt_after must be below the {REPLAN_PERIOD:g} s replanning period, "
+                             f"got {self.adopt_after}")
         if self.search_value >= self.track_value:
             raise ValueError(f"tasking.search_value ({self.search_value}) must be below track_value "
                              f"({self.track_value}): a target in view comes before an area to search")
@@ -156,11 +171,14 @@ def slot_of(key: str) -> tuple[str, int]:
 class AssignmentPlanner:
     """Serve the task the fleet's consensus gave this vehicle (:class:`tasking.base.AssignmentView`), kept
     ``min_separation`` from its peers by :class:`tasking.separation.SeparationLayer` (acting on the vehicle's
-    velocity, every ``step`` seconds, bounded by the fleet's top speed ``max_speed``)."""
+    velocity, every ``step`` seconds, bounded by the fleet's top speed ``max_speed``). With a ``standoff`` pilot
+    (``standoff = "collocation"``) a track served alone is flown on the pilot's collocation plan, the circle
+    until its first plan; the planner's clock counts its calls, ``step`` seconds each."""
 
     def __init__(self, config: AssignmentConfig, area: Area, altitude: float, step: float = 0.2,
-                 max_speed: float | None = None):
+                 max_speed: float | None = None, standoff: StandoffPilot | None = None):
         self.config, self.area, self.altitude, self.step = config, check_area(area), float(altitude), float(step)
+        self.standoff, self._calls = standoff, 0
         self.layer_speed = max_speed if max_speed is not None else config.cruise_speed
         self.layer = SeparationLayer(config.min_separation, self.layer_speed) if config.min_separation > 0 else None
         self._sweeps: dict[str, WaypointFollower] = {}
@@ -169,6 +187,7 @@ class AssignmentPlanner:
 
     def plan(self, state: VehicleStateLike, views: Mapping[str, object]) -> Goal:
         view: AssignmentView = views["tasks"]
+        self._calls += 1
         goal = self._serve(state, view, views.get("track"))
         return goal if self.layer is None else self._separated(state, view, goal)
 
@@ -188,6 +207,8 @@ class AssignmentPlanner:
     def _serve(self, state: VehicleStateLike, view: AssignmentView, tracks: TrackView | None) -> Goal:
         position = np.asarray(state.position, float)
         task = view.task
+        if self.standoff is not None and (task is None or task.kind != "track" or view.home or view.partners):
+            self.standoff.release()
         if view.home:
             self.mode = "home"
             return goto_goal(view.base, self.altitude)
@@ -202,7 +223,22 @@ class AssignmentPlanner:
             return goto_goal(self._sweep(task.key).current(position)[:2], self.altitude)
         if view.partners:
             return self._spaced(position[:2], task, view.partners, tracks)
-        return orbit_setpoint(task.position, self.config.orbit_radius, self.altitude)
+        circle = orbit_setpoint(task.position, self.config.orbit_radius, self.altitude)
+        if self.standoff is None:
+            return circle
+        target = slot_of(task.key)[0]
+        velocity = _velocity(tracks, target)
+        planned = self.standoff.goal((self._calls - 1) * self.step, state, target, task.position, velocity)
+        return circle if planned is None else planned
+
+    def close(self) -> None:
+        """Stop the standoff pilot's worker thread (the agent's ``close``)."""
+        if self.standoff is not None:
+            self.standoff.close()
+
+    def metrics(self) -> dict:
+        """The standoff pilot's figures under ``"standoff"`` (nothing without one)."""
+        return {} if self.standoff is None else {"standoff": self.standoff.metrics()}
 
     def _spaced(self, own: np.ndarray, task: Task, partners: Mapping[str, np.ndarray],
                 tracks: TrackView | None) -> Goal:
@@ -211,9 +247,7 @@ class AssignmentPlanner:
         the target's fused velocity (004 §2.8's translation) plus the rotation at the rate of the spacing law
         between this vehicle's circle-neighbours among ``partners``. Flown clockwise, the sense in which the
         phase grows; the vehicle's position loop pulls it onto the circle, the feed-forward carries it along."""
-        track_id = slot_of(task.key)[0].removeprefix("track:")
-        velocities = {} if tracks is None else {str(tid): v for tid, v in tracks.velocities.items()}
-        centre_velocity = np.asarray(velocities.get(track_id, np.zeros(2)), float)
+        centre_velocity = _velocity(tracks, slot_of(task.key)[0])
         positions = np.vstack([own, *partners.values()])
         theta, ahead, behind = circle_gaps(np.broadcast_to(task.position, positions.shape), positions,
                                            np.ones((len(positions),) * 2, bool))
@@ -230,3 +264,9 @@ class AssignmentPlanner:
             path = lawnmower_waypoints(cell, self.config.spacing, self.altitude)
             self._sweeps[key] = WaypointFollower(path, self.config.spacing / 2)
         return self._sweeps[key]
+
+
+def _velocity(tracks: TrackView | None, target: str) -> np.ndarray:
+    """The fused velocity (north, east) of ``target`` (``track:<id>``), zero if the view has none."""
+    velocities = {} if tracks is None else {str(tid): v for tid, v in tracks.velocities.items()}
+    return np.asarray(velocities.get(target.removeprefix("track:"), np.zeros(2)), float)[:2]

@@ -537,6 +537,16 @@ def unicycle_state(position, velocity, yaw: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class Replanning:
+    """One replanning at time ``t``: its ``solves`` and their wall and thread-CPU times [s]."""
+
+    t: float
+    solves: tuple[Plan, ...]
+    wall: float
+    cpu: float
+
+
+@dataclass(frozen=True)
 class PlanSetpoint:
     """The plan at time ``t``: NED ``position`` (3,) (depth ``-altitude``: the target on the origin's ground
     plane), NED ground ``velocity`` (3,) (level), ``heading`` [rad] and airspeed ``speed`` [m/s]."""
@@ -584,19 +594,38 @@ class RecedingHorizonPlanner:
         return self._sample(float(t))
 
     def _replan(self, t: float, state: np.ndarray, target_mean, target_velocity) -> None:
-        started = time.perf_counter()
-        guesses = [None if self.plan is None else shifted_guess(self.plan, t, state, self.config)]
+        self.adopt(self.solve(t, state, target_mean, target_velocity, self.plan))
+
+    def solve(self, t: float, state, target_mean, target_velocity, previous: Plan | None) -> Replanning:
+        """The solves of one replanning at ``t`` from ``previous`` (warm start) and, if ``orbit_start``, the orbit
+        guess. Reads only this planner's immutable settings and its arguments, so it may run on another thread
+        (:mod:`tasking.standoff`) while :meth:`adopt` and :meth:`sample` run on the caller's."""
+        started, cpu = time.perf_counter(), time.thread_time()
+        state = as_vector(state, "state (north, east, heading, speed)", 4)
+        guesses = [None if previous is None else shifted_guess(previous, t, state, self.config)]
         if self.orbit_start:
             guesses.append(orbit_guess(state, target_mean, target_velocity, self.limits, self.config))
         solved = [plan(state, target_mean, target_velocity, self.limits, self.config, t0=t, wind=self.wind,
                        initial_guess=guess) for guess in guesses]
-        self.solves.extend(solved)
-        self.replan_times.append(time.perf_counter() - started)
-        good = [p for p in solved if p.success]
+        return Replanning(float(t), tuple(solved), time.perf_counter() - started, time.thread_time() - cpu)
+
+    def adopt(self, replanning: Replanning) -> bool:
+        """Take a replanning's successful plan of lowest objective; with none, keep the previous plan while it
+        covers the replanning's time (else take the first solve). ``True`` if a successful plan was taken."""
+        self.solves.extend(replanning.solves)
+        self.replan_times.append(replanning.wall)
+        good = [p for p in replanning.solves if p.success]
         if good:
             self.plan = min(good, key=lambda p: p.objective)
-        elif self.plan is None or t > self.plan.end:
-            self.plan = solved[0]
+        elif self.plan is None or replanning.t > self.plan.end:
+            self.plan = replanning.solves[0]
+        return bool(good)
+
+    def sample(self, t: float) -> PlanSetpoint:
+        """The current plan's set-point at ``t`` (clamped to its horizon); a plan must have been adopted."""
+        if self.plan is None:
+            raise ValueError("no plan yet: adopt a replanning first")
+        return self._sample(float(t))
 
     def _sample(self, t: float) -> PlanSetpoint:
         n, e, heading, speed = self.plan.sample(t)

@@ -19,11 +19,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from numbers import Real
 
-from tasking.assignment import AssignmentConfig, AssignmentPlanner
+from tasking.assignment import WORDS, AssignmentConfig, AssignmentPlanner
 from tasking.base import Planner
 from tasking.entropy import EntropyPlanner, EntropyPlannerConfig
 from tasking.feature_planner import FeaturePlanner, FeaturePlannerConfig
 from tasking.planner import PlaceholderPlanner
+from tasking.standoff import LIVE_WAIT, StandoffPilot, vehicle_limits
 
 DEFAULT_PLANNER = "placeholder"
 
@@ -41,6 +42,8 @@ class PlanningContext:
     hints: Mapping[str, object] = field(default_factory=dict)  # from the beliefs, e.g. "detection": (P_D, P_F)
     step: float = 0.2  # s between planner calls (the agent's cycle)
     max_speed: float | None = None  # m/s, the vehicle's top speed (None: not known)
+    vehicle: Mapping[str, object] = field(default_factory=dict)  # the [vehicle] section (kind and limits)
+    lockstep: bool = False  # stepped by the lockstep harness: no wall-clock deadline, background work is waited for
 
 
 def _placeholder(options: dict, ctx: PlanningContext) -> Planner:
@@ -49,7 +52,11 @@ def _placeholder(options: dict, ctx: PlanningContext) -> Planner:
 
 
 def _assignment(options: dict, ctx: PlanningContext) -> Planner:
-    return AssignmentPlanner(AssignmentConfig.from_options(options), ctx.area, ctx.altitude, ctx.step, ctx.max_speed)
+    config = AssignmentConfig.from_options(options)
+    standoff = None if config.standoff == "circle" else StandoffPilot(
+        vehicle_limits(ctx.vehicle, ctx.max_speed), ctx.altitude, config.adopt_after,
+        wait=None if ctx.lockstep else LIVE_WAIT)
+    return AssignmentPlanner(config, ctx.area, ctx.altitude, ctx.step, ctx.max_speed, standoff)
 
 
 def _entropy(options: dict, ctx: PlanningContext) -> Planner:
@@ -75,7 +82,8 @@ PLANNERS: dict[str, PlannerEntry] = {
         "search": str, "spacing": _NUMBER, "orbit_radius": _NUMBER, "acceptance_radius": _NUMBER,
         "orbit_direction": int, "speed": _NUMBER}),
     "assignment": PlannerEntry(_assignment, "tasks", {
-        f.name: (int if f.name in ("capacity", "orbit_slots") else _NUMBER) for f in fields(AssignmentConfig)},
+        f.name: (int if f.name in ("capacity", "orbit_slots") else str if f.name in WORDS else _NUMBER)
+        for f in fields(AssignmentConfig)},
         AssignmentConfig.from_options),
     "entropy": PlannerEntry(_entropy, "grid", {
         f.name: (int if f.name == "horizon" else _NUMBER) for f in fields(EntropyPlannerConfig)

@@ -55,8 +55,12 @@ class FixedWingModel(KinematicModel):
     arrived, loiters around it (clockwise) at ``loiter_radius = loiter_margin * min_turn_radius`` with
     the same vector field; the margin (chosen here) leaves bank authority to correct. A waypoint
     inside the turning circle may be missed by up to about ``min_turn_radius``, so a waypoint follower
-    should accept at least that distance. The setpoint speed limit and velocity feed-forward are ignored
-    (constant airspeed: the aircraft cannot add a centre's velocity to its own).
+    should accept at least that distance. The setpoint speed limit is ignored (constant airspeed).
+
+    A position setpoint with a velocity feed-forward ``v_ff`` is a moving point to fly along (a planned path's
+    set-point, :mod:`tasking.standoff`): the desired course is that of ``v_ff + (p_sp - p) / track_time`` —
+    the path's own course on it, turning back onto it off it — and there is no arrival. An orbit's
+    feed-forward is ignored (constant airspeed: the aircraft cannot add a centre's velocity to its own).
     """
 
     def __init__(
@@ -71,6 +75,7 @@ class FixedWingModel(KinematicModel):
         heading_gain: float = 1.0,  # 1/s, chosen here
         altitude_gain: float = 0.5,  # 1/s, chosen here
         loiter_margin: float = 1.2,  # chosen here
+        track_time: float = 2.0,  # s, chosen here: the time to close the gap to a moving set-point
         t0: float = 0.0,
     ):
         self.airspeed = positive("airspeed", airspeed)
@@ -84,6 +89,7 @@ class FixedWingModel(KinematicModel):
         self.heading_gain = positive("heading_gain", heading_gain)
         self.altitude_gain = positive("altitude_gain", altitude_gain)
         self.loiter_margin = positive("loiter_margin", loiter_margin)
+        self.track_time = positive("track_time", track_time)
         if self.loiter_margin < 1.0:
             raise ValueError(f"loiter_margin must be at least 1, got {loiter_margin}")
         if not math.isfinite(heading):
@@ -125,7 +131,8 @@ class FixedWingModel(KinematicModel):
     def _guidance(self) -> Callable[[np.ndarray], np.ndarray]:
         """The desired-course field for the current setpoint, as a function of the position (north, east).
 
-        Orbit setpoint: the Lawrence field. Position setpoint: head straight for the point until
+        Orbit setpoint: the Lawrence field. Moving point (position and velocity): ``v_ff + (p_sp - p) / track_time``.
+        Position setpoint: head straight for the point until
         arrival, then the Lawrence field around it at ``loiter_radius``. Arrival (sticky while the
         setpoint stays within half a loiter radius of the arrival point) is declared at the closest
         approach inside the loiter radius — when the range starts to grow — or within 1 m.
@@ -136,6 +143,9 @@ class FixedWingModel(KinematicModel):
             radius = max(radius, self.min_turn_radius)
             return lambda p: orbit_vector_field(p - center, radius, direction, 1.0)
         point = sp.position[:2]
+        if sp.velocity is not None:
+            self._arrived_at = None
+            return lambda p: sp.velocity + (point - p) / self.track_time
         if self._arrived_at is not None and np.linalg.norm(point - self._arrived_at) > 0.5 * self.loiter_radius:
             self._arrived_at = None  # a new point: fly to it
         if self._arrived_at is None:

@@ -106,7 +106,7 @@ BENCHMARKS: dict[str, Benchmark] = {
             "tasking",
             "mesh_sim.bench.tasking",
             "issue 13's tasking benchmarks in one run: tasking-fleet, tasking-health, tasking-orbit, "
-            "tasking-rendezvous, tasking-paths, tasking-feature (and their goals)",
+            "tasking-rendezvous, tasking-paths, tasking-feature, tasking-standoff (and their goals)",
         ),
         Benchmark(
             "tasking-fleet",
@@ -137,6 +137,12 @@ BENCHMARKS: dict[str, Benchmark] = {
             "mesh_sim.bench.tasking_paths",
             "collocation planner (Ross et al., spec 002): solve time cold/warm vs the 0.5 s budget, stand-off "
             "information vs a circle and a straight pass; separation layer over crossing swarms of 8 and 16",
+        ),
+        Benchmark(
+            "tasking-standoff",
+            "mesh_sim.bench.tasking_standoff",
+            "standoff scenario, lockstep: fixed wings on collocation plans (Ross et al., spec 002) vs the loiter "
+            "circle on the same seeds (per-target oracle RMSE and ratio, fleet ÷ oracle, solve time vs 0.5 s, CPU)",
         ),
         Benchmark(
             "tasking-feature",

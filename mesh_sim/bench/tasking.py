@@ -12,7 +12,8 @@ import importlib
 
 from mesh_sim.bench import common
 
-PARTS = ("tasking_fleet", "tasking_health", "tasking_orbit", "tasking_rendezvous", "tasking_paths", "tasking_feature")
+PARTS = ("tasking_fleet", "tasking_health", "tasking_orbit", "tasking_rendezvous", "tasking_paths", "tasking_feature",
+         "tasking_standoff")
 
 
 def _part(module: str):

@@ -36,13 +36,14 @@ WINDOW = 3.0  # s: the agreement goal's window
 LOSS = 0.3
 
 
-def _lockstep(runs: Path, seed: int, duration: float, **overrides) -> dict:
+def _lockstep(runs: Path, seed: int, duration: float, scenario: str = "default", **overrides) -> dict:
+    """A lockstep run of ``scenario`` (with the loader's ``overrides``) in a new folder under ``runs``."""
     from mesh_sim.launcher import new_run_dir
     from mesh_sim.lockstep import run_lockstep
     from mesh_sim.scenario import load
 
-    scenario = load("default", seed=seed, duration=duration, **overrides)
-    return run_lockstep(scenario, new_run_dir(runs, f"{NAME}-{seed}"))
+    loaded = load(scenario, seed=seed, duration=duration, **overrides)
+    return run_lockstep(loaded, new_run_dir(runs, f"{scenario}-{seed}"))
 
 
 def _per_target(metrics: dict) -> dict[str, dict]:

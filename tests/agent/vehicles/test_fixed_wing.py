@@ -57,6 +57,19 @@ def test_fixed_wing_converges_onto_orbit_of_requested_radius(radius_factor, star
     assert state.position[2] == pytest.approx(-60.0, abs=0.01)
 
 
+def test_fixed_wing_flies_along_a_moving_setpoint_with_feed_forward():
+    """A planned path's set-point (position + velocity): the aircraft joins it and flies along, no loitering."""
+    vehicle = FixedWingModel([0.0, 30.0, -60.0], 0.0)
+    velocity = np.array([18.0, 0.0])
+    for k in range(150):  # 30 s: the point moves north at the airspeed along east = 0
+        point = np.array([18.0 * 0.2 * k, 0.0, -60.0])
+        vehicle.set_setpoint(Setpoint(point, velocity=velocity))
+        vehicle.step(0.2)
+    state = vehicle.state()
+    assert abs(state.position[1]) < 1.0 and abs(state.position[0] - 18.0 * 0.2 * 150) < 10.0
+    assert abs(wrap_angle(state.yaw)) < 0.05
+
+
 def test_fixed_wing_loiters_around_position_setpoint_and_clamps_small_orbits():
     vehicle = FixedWingModel([0.0, 0.0, -40.0], 0.0)
     target = np.array([-300.0, 200.0, -70.0])
