@@ -157,9 +157,14 @@ def fleet_tasks(tracks: Sequence[tuple[Hashable, np.ndarray]], searches: Mapping
     tasks = dict(searches)
     for track_id, position in tracks:
         for slot in range(config.orbit_slots):
-            key = f"track:{track_id}" + (f"{SLOT}{slot}" if slot else "")
+            key = slot_key(f"track:{track_id}", slot)
             tasks[key] = Task(key, np.asarray(position, float)[:2], config.track_value / (slot + 1), "track")
     return tasks
+
+
+def slot_key(target: str, slot: int) -> str:
+    """The key of ``target``'s slot ``slot`` (slot 0: ``target`` itself); :func:`slot_of` reads it back."""
+    return target + (f"{SLOT}{slot}" if slot else "")
 
 
 def slot_of(key: str) -> tuple[str, int]:

@@ -34,7 +34,7 @@ from agent.net import wire
 from agent.plugins import Outgoing, Views
 from agent.sensors.truth import TruthSnapshot
 from fusion.resync import Edge
-from tasking.assignment import SLOT, AssignmentConfig, fleet_tasks, search_cells, search_tasks, slot_of
+from tasking.assignment import AssignmentConfig, fleet_tasks, search_cells, search_tasks, slot_key, slot_of
 from tasking.base import AssignmentView
 from tasking.cbba import CBBA, Bids, path_score
 from tasking.health import VehicleHealth
@@ -59,6 +59,7 @@ class AssignmentExchange:
         self.base = np.asarray(base, float)[:2]
         self.cells = search_cells(area, config.search_cell)
         self.searches = search_tasks(self.cells, config)
+        self.slots = {slot_key(TRACK, s) for s in range(config.orbit_slots)}  # track task keys on the wire
         self.cbba = CBBA(me, config.capacity, config.stickiness)
         self.merges = 0
         self.tasks: dict[str, Task] = {}
@@ -134,7 +135,7 @@ class AssignmentExchange:
         numbers = [*at, *stamps.values(), *(x for e in entries for x in (e[1], e[2], e[4]))]
         if not all(math.isfinite(x) for x in numbers):
             raise wire.DecodeError("non_finite", "NaN or inf in a tasks message")
-        slots = {TRACK, *(f"{TRACK}{SLOT}{s}" for s in range(1, self.config.orbit_slots))}
+        slots = self.slots
         unknown = [e[0] for e in entries if e[0] not in slots and e[0] not in self.cells]
         if unknown:
             raise wire.DecodeError("bad_field", f"unknown task keys {unknown[:3]}")
@@ -159,8 +160,7 @@ class AssignmentExchange:
         matched = {}
         for key, north, east, winner, bid in entries:
             if (north, east) in target:
-                slot = key.partition(SLOT)[2]
-                matched[target[north, east] + (SLOT + slot if slot else "")] = (winner, bid)
+                matched[slot_key(target[north, east], slot_of(key)[1])] = (winner, bid)
         return matched
 
     @property
@@ -215,10 +215,7 @@ class AssignmentExchange:
 def _wire_key(key: str) -> str:
     """A task's key on the wire: track ids are local, so a track task travels as ``track`` (slot 0) or
     ``track#s`` with its position, and the receiver matches it to its own track (:meth:`_match_tracks`)."""
-    if not key.startswith(TRACK):
-        return key
-    slot = slot_of(key)[1]
-    return TRACK + (f"{SLOT}{slot}" if slot else "")
+    return slot_key(TRACK, slot_of(key)[1]) if key.startswith(TRACK) else key
 
 
 def agreement(timelines: dict[str, list], end: float, window: float) -> dict:

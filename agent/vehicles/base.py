@@ -35,6 +35,10 @@ from tasking.orbit import Goal
 
 GRAVITY = 9.80665  # m/s^2
 
+#: Share of the acceleration limit an orbit's centripetal acceleration may use: orbits are flown at most at
+#: ``sqrt(ORBIT_ACCEL_SHARE a_max r)`` (chosen here, leaving the rest to correct the radius).
+ORBIT_ACCEL_SHARE = 0.8
+
 #: Integration sub-step (s), chosen here: a 5 Hz agent step is integrated in >= 10 sub-steps.
 MAX_SUBSTEP = 0.02
 

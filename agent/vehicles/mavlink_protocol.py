@@ -58,19 +58,3 @@ PX4_OFFBOARD = px4_custom_mode(PX4_MAIN_OFFBOARD)
 PX4_TAKEOFF = px4_custom_mode(PX4_MAIN_AUTO, PX4_AUTO_TAKEOFF)
 PX4_HOLD = px4_custom_mode(PX4_MAIN_AUTO, PX4_AUTO_LOITER)
 PX4_LAND = px4_custom_mode(PX4_MAIN_AUTO, PX4_AUTO_LAND)
-PX4_RTL = px4_custom_mode(PX4_MAIN_AUTO, PX4_AUTO_RTL)
-PX4_READY = px4_custom_mode(PX4_MAIN_AUTO, PX4_AUTO_READY)
-
-
-def px4_offboard_endpoint(instance: int, host: str = "0.0.0.0") -> str:
-    """pymavlink URL a companion computer listens on for PX4 instance ``instance`` (offboard API)."""
-    if instance < 0:
-        raise ValueError(f"instance must be >= 0, got {instance}")
-    return f"udpin:{host}:{PX4_OFFBOARD_PORT + instance}"
-
-
-def ardupilot_endpoint(instance: int, host: str = "127.0.0.1") -> str:
-    """pymavlink URL of ArduPilot SITL instance ``instance``."""
-    if instance < 0:
-        raise ValueError(f"instance must be >= 0, got {instance}")
-    return f"tcp:{host}:{ARDUPILOT_TCP_PORT + 10 * instance}"

@@ -12,6 +12,7 @@ import numpy as np
 
 from agent.vehicles.base import (
     GRAVITY,
+    ORBIT_ACCEL_SHARE,
     ConfigField,
     KinematicModel,
     Setpoint,
@@ -119,7 +120,8 @@ class MultirotorModel(KinematicModel):
         center, radius, direction = sp.orbit
         dz = float(sp.position[2] - self._p[2])
         vz = math.copysign(_approach_speed(abs(dz), min(self.max_climb, limit), self.position_gain, decel), dz)
-        cruise = min(limit, math.sqrt(0.8 * self.max_accel * radius), math.sqrt(max(limit**2 - vz**2, 0.0)))
+        orbit_speed = math.sqrt(ORBIT_ACCEL_SHARE * self.max_accel * radius)  # v²/r within the share of a_max
+        cruise = min(limit, orbit_speed, math.sqrt(max(limit**2 - vz**2, 0.0)))
         horizontal = orbit_vector_field(self._p[:2] - center, radius, direction, cruise)
         return self._feed_forward(np.array([horizontal[0], horizontal[1], vz]))
 

@@ -122,23 +122,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--vehicle-param", type=_vehicle_param, action="append", default=[], dest="vehicle_params",
                         metavar="KEY=NUMBER", help="a [vehicle] key of the kinematic model, e.g. max_speed=12 "
                         "(repeatable; a scenario's keys, as skymesh run --vehicle mavlink passes them)")
-    parser.add_argument("--north", type=float, default=0.0, help="start position north of the origin [m]")
-    parser.add_argument("--east", type=float, default=0.0, help="start position east of the origin [m]")
-    parser.add_argument("--heading", type=float, default=0.0, dest="heading_deg", help="start heading [deg]")
-    parser.add_argument("--altitude", type=_non_negative, default=0.0,
+    parser.add_argument("--north", type=float, default=AutopilotOptions.north,
+                        help="start position north of the origin [m]")
+    parser.add_argument("--east", type=float, default=AutopilotOptions.east,
+                        help="start position east of the origin [m]")
+    parser.add_argument("--heading", type=float, default=AutopilotOptions.heading_deg, dest="heading_deg",
+                        help="start heading [deg]")
+    parser.add_argument("--altitude", type=_non_negative, default=AutopilotOptions.altitude,
                         help="start this high [m], armed and holding (default 0: on the ground, as PX4 SITL boots); "
                              "skymesh run --vehicle mavlink starts at the scenario's altitude, as its kinematic runs")
-    parser.add_argument("--origin", type=_origin, default=DEFAULT_ORIGIN, metavar="LAT,LON,ALT",
+    parser.add_argument("--origin", type=_origin, default=AutopilotOptions.origin, metavar="LAT,LON,ALT",
                         help="NED origin and GPS_GLOBAL_ORIGIN (default: skymesh's default scenario origin)")
-    parser.add_argument("--host", default="127.0.0.1", help="address to bind and to send to (default 127.0.0.1)")
+    parser.add_argument("--host", default=AutopilotOptions.host,
+                        help="address to bind and to send to (default 127.0.0.1)")
     parser.add_argument("--offboard-port", type=_port, help="local offboard port (default 14580 + I)")
     parser.add_argument("--offboard-remote-port", type=_port, help="offboard computer's port (default 14540 + I)")
     parser.add_argument("--gcs-port", type=_port, help="local ground-station port (default 18570 + I)")
-    parser.add_argument("--gcs-remote-port", type=_port, default=PX4_GCS_PORT, help="ground station's port (14550)")
-    parser.add_argument("--latency-ms", type=_non_negative, default=0.0, help="one-way delay, each direction [ms]")
-    parser.add_argument("--flight-time", type=float, default=1200.0, help="armed seconds on a full battery")
-    parser.add_argument("--battery", type=_fraction, default=1.0, help="initial battery charge, 0..1")
-    parser.add_argument("--position-valid-after", type=_non_negative, default=1.5,
+    parser.add_argument("--gcs-remote-port", type=_port, default=AutopilotOptions.gcs_remote_port,
+                        help="ground station's port (14550)")
+    parser.add_argument("--latency-ms", type=_non_negative, default=AutopilotOptions.latency_ms,
+                        help="one-way delay, each direction [ms]")
+    parser.add_argument("--flight-time", type=float, default=AutopilotOptions.flight_time,
+                        help="armed seconds on a full battery")
+    parser.add_argument("--battery", type=_fraction, default=AutopilotOptions.battery,
+                        help="initial battery charge, 0..1")
+    parser.add_argument("--position-valid-after", type=_non_negative,
+                        default=AutopilotOptions.position_valid_after,
                         help="seconds after boot before the position estimate is valid (arming refused before)")
     parser.add_argument("--duration", type=_non_negative, help="exit after this many seconds")
     parser.add_argument("--parent-pid", type=int, help="exit when this process is gone")

@@ -171,6 +171,11 @@ def fmt_ms(value: float | None) -> str:
     return f"{value:.3f}" if value < 1 else f"{value:.2f}" if value < 100 else f"{value:.0f}"
 
 
+def ratio(a: float | None, b: float | None) -> float | None:
+    """``a / b``, ``None`` when either is missing or ``b`` is zero (a figure against its same-run baseline)."""
+    return None if a is None or not b else a / b
+
+
 def fmt_ratio(value: float | None) -> str:
     if value is None or not math.isfinite(value):
         return "—"

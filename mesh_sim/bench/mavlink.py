@@ -287,7 +287,6 @@ def run(quick: bool = False, repeats: int | None = None) -> dict:
             "rates_pass": all(abs(r["ratio"] - 1.0) <= RATE_TOLERANCE for r in rate_rows if r["requested_hz"] >= 1.0),
             "cpu_pass": max(cpu) < CPU_GOAL,
             "response_pass": response["median_ms"] <= floor_ms + 5.0,
-            "response_over_bare": ratio,
         },
     }
 

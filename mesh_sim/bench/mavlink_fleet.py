@@ -40,8 +40,8 @@ SERVED_WINDOW = 2.0  # s before the fault over which what the victim served is r
 def fly(runs: Path, label: str, seed: int, duration: float, vehicle: str, fault: tuple[float, float] | None = None
         ) -> tuple[dict, dict]:
     """One live run of the default scenario; with ``fault = (at, resume)`` the victim's autopilot is frozen over
-    that span of simulation time. Returns the metrics and ``{"frozen_wall": ..., "epoch": ..., "pids": ...}``
-    (the freeze's wall time and the run's epoch with a fault; every child's PID)."""
+    that span of simulation time. Returns the metrics and ``{"frozen_wall": ..., "pids": ...}``
+    (the freeze's wall time, with a fault; every child's PID)."""
     from rich.console import Console
 
     from mesh_sim.launcher import Launcher, new_run_dir
@@ -72,7 +72,7 @@ def freeze(launcher, child: str, at: float, resume: float) -> dict:
     os.kill(pid, signal.SIGSTOP)
     time.sleep(max(0.0, epoch + resume - time.time()))
     os.kill(pid, signal.SIGCONT)
-    return {"frozen_wall": frozen, "epoch": epoch}
+    return {"frozen_wall": frozen}
 
 
 def detection_s(metrics: dict, victim: str, frozen_wall: float) -> float | None:
@@ -167,9 +167,9 @@ def report(result: dict, console=None) -> None:
         [(v, common.fmt(_mean(rows, v, "fleet_rmse"), ".2f", " m"), common.fmt(_mean(rows, v, "oracle_rmse"), ".2f",
                                                                              " m"),
           common.fmt(_mean(rows, v, "fleet_ratio"), ".3f"),
-          common.fmt_ratio(_ratio(_mean(rows, v, "fleet_ratio"), kinematic["fleet_ratio"])),
+          common.fmt_ratio(common.ratio(_mean(rows, v, "fleet_ratio"), kinematic["fleet_ratio"])),
           common.fmt(_mean(rows, v, "first_track_s"), ".1f", " s"), common.fmt_ms(_mean(rows, v, "cpu_per_step_ms")),
-          common.fmt_ratio(_ratio(_mean(rows, v, "cpu_per_step_ms"), kinematic["cpu_per_step_ms"])),
+          common.fmt_ratio(common.ratio(_mean(rows, v, "cpu_per_step_ms"), kinematic["cpu_per_step_ms"])),
           common.fmt(_mean(rows, v, "deadline_misses"), ".0f")) for v in ("kinematic", "mavlink")])
     f = result["fault"]
     common.print_table(
@@ -180,7 +180,3 @@ def report(result: dict, console=None) -> None:
     common.print_table(console, "goals", ["goal", "target", "measured", "met"],
                        [(g["name"], g["target"], common.fmt(g["measured"], ".3g"), common.verdict(g["met"]))
                         for g in result["goals"]])
-
-
-def _ratio(a, b):
-    return None if a is None or not b else a / b

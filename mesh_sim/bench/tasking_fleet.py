@@ -139,7 +139,7 @@ def report(result: dict, console=None) -> None:
          "fleet ÷ oracle placeholder", "fleet ÷ oracle assignment", "coverage"],
         [(t, common.fmt(_mean(rows, "placeholder", t, "oracle_rmse"), ".2f", " m"),
           common.fmt(_mean(rows, "assignment", t, "oracle_rmse"), ".2f", " m"),
-          common.fmt_ratio(_ratio(_mean(rows, "assignment", t, "oracle_rmse"),
+          common.fmt_ratio(common.ratio(_mean(rows, "assignment", t, "oracle_rmse"),
                                   _mean(rows, "placeholder", t, "oracle_rmse"))),
           common.fmt_ratio(_mean(rows, "placeholder", t, "ratio")),
           common.fmt_ratio(_mean(rows, "assignment", t, "ratio")),
@@ -148,7 +148,7 @@ def report(result: dict, console=None) -> None:
         console, "cost and safety (lockstep wall time per agent step; closest approach of two UAVs)",
         ["planner", "ms per agent step", "÷ placeholder", "closest approach"],
         [(p, common.fmt_ms(_mean(rows, p, targets[0], "cpu_per_step_ms")),
-          common.fmt_ratio(_ratio(_mean(rows, p, targets[0], "cpu_per_step_ms"),
+          common.fmt_ratio(common.ratio(_mean(rows, p, targets[0], "cpu_per_step_ms"),
                                   _mean(rows, "placeholder", targets[0], "cpu_per_step_ms"))),
           common.fmt(min((r["closest_m"] for r in rows if r["planner"] == p and r["closest_m"] is not None),
                          default=None), ".1f", " m"))
@@ -161,7 +161,3 @@ def report(result: dict, console=None) -> None:
     common.print_table(console, "goals", ["goal", "target", "measured", "met"],
                        [(g["name"], g["target"], common.fmt(g["measured"], ".3f"), common.verdict(g["met"]))
                         for g in result["goals"]])
-
-
-def _ratio(a, b):
-    return None if a is None or not b else a / b

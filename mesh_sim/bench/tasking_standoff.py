@@ -68,17 +68,13 @@ def _mean(rows, mode, target, key):
     return float(np.mean(values)) if values else None
 
 
-def _ratio(a, b):
-    return None if a is None or not b else a / b
-
-
 def _goals(rows: list[dict], cost: list[dict]) -> list[dict]:
     targets = sorted({r["target"] for r in rows})
     planned = [c for c in cost if c["mode"] == "collocation"]
     p95 = max((c["solve_cpu_p95_s"] or 0.0) for c in planned) if planned else None
     late = sum(c["late"] for c in planned)
     worst = max((_mean(rows, "collocation", t, "ratio") or np.inf) for t in targets) if targets else np.inf
-    gains = [_ratio(_mean(rows, "collocation", t, "oracle_rmse"), _mean(rows, "circle", t, "oracle_rmse"))
+    gains = [common.ratio(_mean(rows, "collocation", t, "oracle_rmse"), _mean(rows, "circle", t, "oracle_rmse"))
              for t in targets]
     return [
         {"name": f"replanning thread-CPU p95 within the {BUDGET_S:g} s budget", "target": f"≤ {BUDGET_S:g} s",
@@ -101,7 +97,7 @@ def report(result: dict, console=None) -> None:
          "fleet ÷ oracle circle", "fleet ÷ oracle collocation"],
         [(t, common.fmt(_mean(rows, "circle", t, "oracle_rmse"), ".2f", " m"),
           common.fmt(_mean(rows, "collocation", t, "oracle_rmse"), ".2f", " m"),
-          common.fmt_ratio(_ratio(_mean(rows, "collocation", t, "oracle_rmse"),
+          common.fmt_ratio(common.ratio(_mean(rows, "collocation", t, "oracle_rmse"),
                                   _mean(rows, "circle", t, "oracle_rmse"))),
           common.fmt_ratio(_mean(rows, "circle", t, "ratio")),
           common.fmt_ratio(_mean(rows, "collocation", t, "ratio"))) for t in targets])
@@ -111,7 +107,7 @@ def report(result: dict, console=None) -> None:
         ["seed", "mode", "ms per agent step", "÷ circle", "replannings", "adopted", "late", "failed",
          "wall median", "wall p95", "CPU median", "CPU p95"],
         [(c["seed"], c["mode"], common.fmt_ms(c["cpu_per_step_ms"]),
-          common.fmt_ratio(_ratio(c["cpu_per_step_ms"], circle.get(c["seed"]))), c["requested"], c["adopted"],
+          common.fmt_ratio(common.ratio(c["cpu_per_step_ms"], circle.get(c["seed"]))), c["requested"], c["adopted"],
           c["late"], c["failed"], *(common.fmt_ms(None if c[k] is None else 1e3 * c[k])
                                     for k in ("solve_median_s", "solve_p95_s", "solve_cpu_median_s",
                                               "solve_cpu_p95_s"))) for c in cost],

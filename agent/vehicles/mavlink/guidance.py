@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.vehicles.base import Setpoint, orbit_vector_field
+from agent.vehicles.base import ORBIT_ACCEL_SHARE, Setpoint, orbit_vector_field
 
 SETTLE_TIME = 1.0  # s: a point is approached at d / SETTLE_TIME (the kinematic multirotor's position_gain, 1/s)
 LEASH_TIME = 2.0  # s of flight at the speed limit: farther from the vehicle, the reference restarts there (chosen here)
@@ -57,7 +57,7 @@ def reference_velocity(setpoint: Setpoint, position: np.ndarray, limit: float, m
         velocity = _approach(setpoint.position - position, limit)
     else:
         center, radius, direction = setpoint.orbit
-        cruise = min(limit, float(np.sqrt(0.8 * max_accel * radius)))  # v²/r <= 0.8 a_max
+        cruise = min(limit, float(np.sqrt(ORBIT_ACCEL_SHARE * max_accel * radius)))  # v²/r <= share · a_max
         horizontal = orbit_vector_field(position[:2] - center, radius, direction, cruise)
         vertical = _approach(np.array([setpoint.position[2] - position[2]]), limit)
         velocity = np.array([horizontal[0], horizontal[1], vertical[0]])

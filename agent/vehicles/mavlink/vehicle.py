@@ -116,8 +116,12 @@ class MavlinkVehicle:
             position=frames.position_to_scenario(local.position),
             velocity=frames.vector_to_scenario(local.velocity),
             yaw=wrap_angle(yaw + frames.yaw_offset), roll=roll, pitch=pitch,
-            fresh=self._alive(local, self.config.stream_timeout) and self._alive(self.telemetry.heartbeat),
+            fresh=self._fresh(),
         )
+
+    def _fresh(self) -> bool:
+        """The position stream and the heartbeat are both recent: the pose may be sensed with."""
+        return self._alive(self.telemetry.local, self.config.stream_timeout) and self._alive(self.telemetry.heartbeat)
 
     def _alive(self, record, timeout: float | None = None) -> bool:
         """``record`` (a position, a heartbeat) arrived within ``timeout`` (default ``heartbeat_timeout``)."""
@@ -131,7 +135,7 @@ class MavlinkVehicle:
 
     def step(self, dt: float) -> None:
         """Non-blocking (module docstring): watch the health, count a step with a stale pose."""
-        if not self.state().fresh:
+        if not self._fresh():
             self.stale_steps += 1
         reason = self.health_reason
         if reason != self._reason:
@@ -283,8 +287,8 @@ class MavlinkVehicle:
         :meth:`agent.plugins.Sensor.point`, so a camera sensor can hand its goal's ``look_at`` on."""
         if look_at is None:
             return
-        state, frames = self.state(), self.frames()
-        north, east, down = np.asarray(look_at, float) - state.position
+        frames = self.frames()
+        north, east, down = np.asarray(look_at, float) - frames.position_to_scenario(self.telemetry.local.position)
         if math.hypot(north, east, down) < 1e-6:
             return
         pitch = -math.atan2(down, math.hypot(north, east))
