@@ -238,7 +238,7 @@ class Agent:
             "sensor": sensor,
             "sensor_outcomes": dict(Counter(sensor["outcomes"]) + self.unused),
         }
-        for part in (*self.exchanges.values(), self.planner, self.vehicle):  # their metrics are optional
+        for part in (*self.exchanges.values(), self.planner, self.vehicle, self.topology):  # metrics are optional
             out.update(getattr(part, "metrics", dict)())
         return out
 

@@ -3,8 +3,13 @@
 The launcher opens the Zenoh router itself (loopback, multicast scouting off, a free port), then starts
 the world process, N agent processes and — unless ``--rerun off`` — the observer that writes the Rerun
 recording, each as ``python -m ...`` (never by forking this process). It shows progress, and stops
-everything on completion, on Ctrl-C and as soon as a child dies: SIGTERM by PID, then SIGKILL by PID
-after a grace period. Every child also exits by itself if the launcher disappears.
+everything on completion, on Ctrl-C and on a fatal death: SIGTERM by PID, then SIGKILL by PID after a grace
+period. Every child also exits by itself if the launcher disappears.
+
+**Losing a member loses only that member.** An agent that dies (a crash, ``kill -9``) is recorded — name,
+PID, exit status, simulation time — in ``deaths.json`` and the run goes on with the others; so does a
+dead observer (the recording stops) or autopilot (its agent's vehicle turns unhealthy and its tasks go
+to the peers). The run fails only when the world dies before the end or every agent has died.
 
 Start-up is measured in the running system: each child's seconds from its spawn to its ready file (created
 once it has imported its modules, built its state and opened its Zenoh session) are in
@@ -32,6 +37,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from agent.net.zenoh_transport import router_config
+from agent.runtime import write_json
 from mesh_sim import results
 from mesh_sim.scenario import Scenario
 
@@ -50,6 +56,30 @@ class Child:
     started: float  # wall time just before the spawn [s since the Unix epoch]
 
 
+@dataclass(frozen=True)
+class Death:
+    """A child that died while the run went on."""
+
+    name: str
+    role: str
+    pid: int
+    exit_code: int  # negative: killed by that signal (subprocess's convention)
+    t: float  # simulation seconds when the launcher saw it
+
+    @property
+    def cause(self) -> str:
+        if self.exit_code < 0:
+            try:
+                return f"killed by {signal.Signals(-self.exit_code).name}"
+            except ValueError:
+                return f"killed by signal {-self.exit_code}"
+        return f"exit code {self.exit_code}"
+
+    def to_dict(self) -> dict:
+        return {"agent" if self.role == "agent" else "process": self.name, "role": self.role, "pid": self.pid,
+                "exit_code": self.exit_code, "cause": self.cause, "t": self.t}
+
+
 @dataclass
 class RunOutcome:
     run_dir: Path
@@ -57,6 +87,7 @@ class RunOutcome:
     metrics: dict = field(default_factory=dict)
     pids: dict = field(default_factory=dict)
     startup_s: dict = field(default_factory=dict)  # child name -> seconds from its spawn to its ready file
+    deaths: list[Death] = field(default_factory=list)  # children that died while the run went on
 
 
 def free_port() -> int:
@@ -98,6 +129,7 @@ class Launcher:
         self.vehicle = vehicle
         self.children: list[Child] = []
         self.startup_s: dict[str, float] = {}
+        self.deaths: list[Death] = []
 
     # -- lifecycle --------------------------------------------------------------------------------
     def run(self) -> RunOutcome:
@@ -116,9 +148,10 @@ class Launcher:
         finally:
             self._stop_all()
             router.close()
+        write_json(self.run_dir / results.DEATHS_FILE, [d.to_dict() for d in self.deaths])
         metrics = results.collect(self.run_dir, self.scenario, status, self.speed)
         return RunOutcome(self.run_dir, status, metrics, {c.name: c.process.pid for c in self.children},
-                          dict(self.startup_s))
+                          dict(self.startup_s), list(self.deaths))
 
     @property
     def _epoch_file(self) -> Path:
@@ -200,7 +233,8 @@ class Launcher:
         self.children.append(Child(name, role, proc, log_path, started))
 
     def _monitor(self, epoch: float) -> str:
-        """Wait for the agents to finish; return the run's status."""
+        """Wait for the agents to finish; return the run's status. A dead agent, observer or autopilot is
+        recorded and the run goes on; the world dying before the end, or every agent dying, fails it."""
         duration = self.scenario.agent.duration
         progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
                             TextColumn("t={task.completed:.0f}/{task.total:.0f} s"), TimeRemainingColumn(),
@@ -213,12 +247,26 @@ class Launcher:
                 progress.update(task, completed=min(sim_t, duration))
                 for child in self.children:
                     code = child.process.poll()
-                    if code is not None and (code != 0 or child.role != "agent"):
-                        if child.role == "world" and code == 0 and sim_t >= duration:
+                    if code is None or (code == 0 and child.role == "agent") or self._dead(child):
+                        continue
+                    if child.role == "world":
+                        if code == 0 and sim_t >= duration:
                             continue
                         return f"failed: {child.name} (pid {child.process.pid}) exited with code {code}"
-                if all(c.process.poll() == 0 for c in self.children if c.role == "agent"):
-                    return "completed"
+                    self._record_death(child, code, min(sim_t, duration))
+                agents = [c for c in self.children if c.role == "agent"]
+                if all(c.process.poll() is not None for c in agents):
+                    return "completed" if any(c.process.poll() == 0 for c in agents) else "failed: every agent died"
+
+    def _dead(self, child: Child) -> bool:
+        return any(d.name == child.name for d in self.deaths)
+
+    def _record_death(self, child: Child, code: int, t: float) -> None:
+        death = Death(child.name, child.role, child.process.pid, code, round(t, 3))
+        self.deaths.append(death)
+        alive = sum(c.process.poll() is None for c in self.children if c.role == "agent")
+        self.console.print(f"[yellow]{child.name} (pid {death.pid}) died at t = {t:.1f} s ({death.cause}); "
+                           f"the run goes on with {alive} agent{'s' * (alive != 1)}")
 
     def _stop_all(self) -> None:
         """SIGTERM every child still running (by PID), wait, then SIGKILL the stragglers (by PID)."""

@@ -30,7 +30,29 @@ def pooled(targets: list[dict]) -> tuple[float | None, float | None]:
     return float(np.sqrt(np.sum(n * rmse**2) / n.sum())), float(np.sum(n * anees) / n.sum())
 
 
-def _read(path: Path) -> dict | None:
+DEATHS_FILE = "deaths.json"  # the launcher's record of the children that died while the run went on
+
+
+def losses(run_dir: Path, scenario, agents: list[dict]) -> list[dict]:
+    """The agents lost during the run, emulated or real, in one shape: the radio's ``node_loss`` events
+    (:mod:`mesh_sim.radio`) and the agent processes that died (the launcher's :data:`DEATHS_FILE`). Each
+    loss says when (simulation seconds) and why, and how long each survivor took to notice it:
+    ``last heard + neighbour timeout - t`` (:meth:`agent.net.topology.Topology.metrics`; ``None`` for a
+    survivor that never heard the lost agent)."""
+    plan = scenario.raw.get("radio_plan") or {}
+    lost = [{"agent": d["node"], "t": float(d["t"]), "cause": "node_loss"} for d in plan.get("down_nodes", [])]
+    lost += [{"agent": d["agent"], "t": float(d["t"]), "cause": d["cause"], "pid": d["pid"],
+              "exit_code": d["exit_code"]} for d in (_read(run_dir / DEATHS_FILE) or []) if d.get("role") == "agent"]
+    gone = {loss["agent"] for loss in lost}
+    for loss in lost:
+        loss["detected_after"] = {
+            a["id"]: (None if loss["agent"] not in a["peers_last_heard"]
+                      else max(0.0, a["peers_last_heard"][loss["agent"]] + a["neighbour_timeout"] - loss["t"]))
+            for a in agents if a["id"] not in gone and "peers_last_heard" in a}
+    return lost
+
+
+def _read(path: Path) -> dict | list | None:
     try:
         return json.loads(path.read_text())
     except (OSError, json.JSONDecodeError):
@@ -70,6 +92,7 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
             "exact_share": _exact_share(agents),
         },
         "config": {**scenario.raw, "speed": speed},
+        "losses": losses(run_dir, scenario, agents),
     }
     if "grid" in oracle:
         metrics["fleet"]["grid"] = grid_fleet(agents, oracle["grid"], sc)
@@ -176,8 +199,16 @@ def summary_table(metrics: dict) -> Table:
     table.add_row("fleet", _fmt(f["rmse"], ".2f"), _fmt(f["anees"], ".2f"),
                   f"ratio {_fmt(f['rmse_ratio_to_oracle'], '.2f')}", _in_flight(f), _fmt(f.get("exact_share"), ".0%"),
                   _fmt(f["bytes_per_agent_per_s"], ",.0f"), "", "", "", style="bold")
-    table.caption = _orbit_caption(o.get("orbits"))
+    captions = [c for c in (_orbit_caption(o.get("orbits")), *map(_loss_caption, metrics.get("losses", []))) if c]
+    table.caption = "\n".join(captions) or None
     return table
+
+
+def _loss_caption(loss: dict) -> str:
+    """One lost agent under the table: when, why, and how long the survivors took to notice."""
+    noticed = [s for s in loss["detected_after"].values() if s is not None]
+    after = f"; the survivors noticed within {max(noticed):.1f} s" if noticed else ""
+    return f"{loss['agent']} lost at t = {loss['t']:.1f} s ({loss['cause']}){after}"
 
 
 def _orbit_caption(orbits: dict | None) -> str | None:

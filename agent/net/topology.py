@@ -99,6 +99,11 @@ class Topology:
         covered = self.neighbours_of(agent, t) | self.neighbours_of(sender, t) | {agent, sender}
         return any(n not in covered for n in mine)
 
+    def metrics(self) -> dict:
+        """When each peer was last heard: a peer stops being a neighbour ``neighbour_timeout`` later, which is
+        when this agent notices that the peer was lost (:func:`mesh_sim.results.losses`)."""
+        return {"peers_last_heard": dict(sorted(self._heard.items())), "neighbour_timeout": self.timeout}
+
     def neighbours_of(self, agent: str, t: float) -> frozenset[str]:
         """``agent``'s neighbours by its fresh report (our own for ``self.me``; empty if none is known)."""
         if agent == self.me:

@@ -1,0 +1,64 @@
+"""Lost agents in the run's metrics: the radio's emulated ``node_loss`` (lockstep here) and a killed agent
+process (tests/mesh_sim/test_live_run.py) are reported in one shape, ``metrics["losses"]``, with how long each
+survivor took to notice."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from mesh_sim.launcher import Death
+from mesh_sim.lockstep import run_lockstep
+from mesh_sim.results import DEATHS_FILE, losses
+from mesh_sim.scenario import load
+
+
+class _Scenario:
+    def __init__(self, raw: dict):
+        self.raw = raw
+
+
+def _agent(name: str, heard: dict[str, float]) -> dict:
+    return {"id": name, "peers_last_heard": heard, "neighbour_timeout": 3.0}
+
+
+def test_a_node_loss_is_noticed_one_neighbour_timeout_after_the_last_message(tmp_path):
+    """A lockstep run where uav2's radio goes dark at t = 4 s: the survivors heard it last just before and
+    drop it from their neighbours 3 s (the neighbour timeout) later."""
+    scenario = load("default", agents=3, duration=10.0,
+                    radio={"topology": "full", "events": [{"t": 4.0, "kind": "node_loss", "node": "uav2"}]})
+    metrics = run_lockstep(scenario, tmp_path)
+    (loss,) = metrics["losses"]
+    assert (loss["agent"], loss["t"], loss["cause"]) == ("uav2", 4.0, "node_loss")
+    assert set(loss["detected_after"]) == {"uav0", "uav1"}
+    for seconds in loss["detected_after"].values():
+        assert 2.5 <= seconds <= 3.0 + 1e-9, loss
+    assert json.loads((tmp_path / "metrics.json").read_text())["losses"] == metrics["losses"]
+
+
+def test_a_killed_process_and_a_node_loss_have_the_same_shape(tmp_path):
+    """The launcher's record of a SIGKILLed agent and an emulated node loss give the same keys (plus the
+    process's PID and exit code); a survivor that never heard the lost agent says so with None."""
+    death = Death("uav1", "agent", 4242, -9, 12.5)
+    (tmp_path / DEATHS_FILE).write_text(json.dumps([death.to_dict(), Death("observer", "observer", 7, 1, 3.0).to_dict()]))
+    scenario = _Scenario({"radio_plan": {"down_nodes": [{"t": 20.0, "node": "uav2"}]}})
+    agents = [_agent("uav0", {"uav1": 12.3, "uav2": 19.9}), _agent("uav3", {"uav2": 19.5}),
+              {"id": "uav1", "status": "died: no metrics written"}, _agent("uav2", {"uav0": 19.9})]
+    emulated, killed = losses(tmp_path, scenario, agents)
+    assert emulated == {"agent": "uav2", "t": 20.0, "cause": "node_loss",
+                        "detected_after": {"uav0": pytest.approx(2.9), "uav3": pytest.approx(2.5)}}
+    assert killed == {"agent": "uav1", "t": 12.5, "cause": "killed by SIGKILL", "pid": 4242, "exit_code": -9,
+                      "detected_after": {"uav0": pytest.approx(2.8), "uav3": None}}
+    assert set(killed) - {"pid", "exit_code"} == set(emulated)
+
+
+def test_a_death_names_its_cause():
+    assert Death("uav0", "agent", 1, -9, 0.0).cause == "killed by SIGKILL"
+    assert Death("uav0", "agent", 1, 3, 0.0).cause == "exit code 3"
+    assert Death("uav0", "agent", 1, -200, 0.0).cause == "killed by signal 200"
+
+
+def test_no_losses_no_entries(tmp_path):
+    """A run without deaths or node_loss events (no deaths file at all: a lockstep run) reports none."""
+    assert losses(tmp_path, _Scenario({}), [_agent("uav0", {})]) == []
