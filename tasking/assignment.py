@@ -80,6 +80,7 @@ class AssignmentConfig:
     reserve: float = 10.0  # s of flight kept in hand on the way home
     landing_radius: float = 5.0  # m from the base at which a returning vehicle lands
     period: float = 1.0  # s between bid broadcasts when nothing changed
+    peer_timeout: float = 5.0  # s without news of a vehicle before its claims are released (tasking.cbba.CBBA.expire)
     orbit_slots: int = 1  # vehicles that share one target's circle, equally spaced (spec 004 §2.8)
     standoff: str = "circle"  # how a lone vehicle serves a track: the circle, or "collocation" (tasking.standoff)
     adopt_after: float = 0.6  # s after its request at which a collocation replanning is adopted (tasking.standoff)

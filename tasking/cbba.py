@@ -151,6 +151,22 @@ class CBBA:
             self.winners.pop(key, None)
         self._release(next((n for n, key in enumerate(self.bundle) if key not in tasks), None))
 
+    def expire(self, now: float, timeout: float) -> list[str]:
+        """Vehicles nobody has heard of for more than ``timeout`` seconds are gone (a crash, a lost link):
+        their claims are released so that the survivors bid for those tasks. "Heard of" is ``s_ik``, the
+        newest time this vehicle or a neighbour heard from ``k`` (kept by :meth:`merge`), so a vehicle that is
+        alive somewhere in a connected fleet is never expired. CBBA itself (Choi et al. 2009) assumes a fixed
+        fleet; the rule is chosen here. A claim relayed again later by a neighbour that still holds it carries
+        the same stale stamp and is expired again. Returns the vehicles expired."""
+        if not timeout > 0:
+            raise ValueError(f"timeout must be positive, got {timeout!r}")
+        gone = sorted(k for k, stamp in self.stamps.items() if k != self.me and now - stamp > timeout)
+        for k in gone:
+            del self.stamps[k]
+        for key in [key for key, winner in self.winners.items() if winner in gone]:
+            self._set(key, None, 0.0)
+        return gone
+
     # -- phase 2 ---------------------------------------------------------------------------------
     def message(self, now: float) -> Bids:
         """``(z_i, y_i, s_i)`` to broadcast; the vehicle's own stamp is ``now``."""

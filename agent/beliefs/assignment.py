@@ -63,7 +63,9 @@ class AssignmentExchange:
         self.cbba = CBBA(me, config.capacity, config.stickiness)
         self.merges = 0
         self.tasks: dict[str, Task] = {}
-        self.peers: dict[str, np.ndarray] = {}
+        self.peers: dict[str, np.ndarray] = {}  # peer -> its last reported position
+        self._peer_heard: dict[str, float] = {}  # peer -> when its last bids arrived
+        self.expired: list[tuple[float, str]] = []  # (t, vehicle) each time a silent vehicle's claims were released
         self._sent: tuple | None = None
         self._sent_at = -math.inf
         self.changes = 0  # times this agent's own task changed
@@ -87,6 +89,7 @@ class AssignmentExchange:
         autopilot, or whose autopilot took over), bids for nothing: its tasks go to others. A vehicle that
         reports its battery and failures has them stand in for the health model's fuel and failures."""
         self.tasks = fleet_tasks(self.views["track"].positions, self.searches, self.config)
+        self._expire(t)
         position = self.vehicle.state().position[:2]
         serving = self.cbba.path[0] if self.cbba.path else None
         if self.sortie is None:
@@ -99,6 +102,13 @@ class AssignmentExchange:
         self.cbba.rebuild(self.tasks if bidding else {}, path_score(me, self.config.discount))
         if (self.cbba.path[0] if self.cbba.path else None) != serving:
             self.changes += 1
+
+    def _expire(self, t: float) -> None:
+        """A vehicle silent for ``peer_timeout`` (crashed, out of reach) loses its claims, and its last position
+        stops counting for the separation layer: no ghost holds a target or a patch of sky."""
+        self.expired += [(t, k) for k in self.cbba.expire(t, self.config.peer_timeout)]
+        for peer in [p for p, heard in self._peer_heard.items() if t - heard > self.config.peer_timeout]:
+            del self._peer_heard[peer], self.peers[peer]
 
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
         bids = self.cbba.message(t)
@@ -142,6 +152,7 @@ class AssignmentExchange:
         winners = {e[0]: (e[3], e[4]) for e in entries if e[0] not in slots}
         winners.update(self._match_tracks([e for e in entries if e[0] in slots]))
         self.peers[origin] = np.array(at, float)
+        self._peer_heard[origin] = t
         self.merges += 1
         self.cbba.merge(origin, Bids(winners, stamps), t)
         return []  # bids are no belief: nothing to count among the fusions
@@ -207,6 +218,7 @@ class AssignmentExchange:
         return {"assignment": {**health, "task_changes": self.changes,
                                "conflicts_resolved": self.cbba.conflicts_resolved,
                                "merges": self.merges,
+                               "expired": [[t, k] for t, k in self.expired],
                                "serving": dict(kinds),
                                "timeline": [[t, served] for t, served in self.timeline],
                                "evaluated_until": self.evaluated_until}}

@@ -41,7 +41,8 @@ def test_a_killed_process_and_a_node_loss_have_the_same_shape(tmp_path):
     """The launcher's record of a SIGKILLed agent and an emulated node loss give the same keys (plus the
     process's PID and exit code); a survivor that never heard the lost agent says so with None."""
     death = Death("uav1", "agent", 4242, -9, 12.5)
-    (tmp_path / DEATHS_FILE).write_text(json.dumps([death.to_dict(), Death("observer", "observer", 7, 1, 3.0).to_dict()]))
+    observer = Death("observer", "observer", 7, 1, 3.0)  # not an agent: no loss of the fleet
+    (tmp_path / DEATHS_FILE).write_text(json.dumps([death.to_dict(), observer.to_dict()]))
     scenario = _Scenario({"radio_plan": {"down_nodes": [{"t": 20.0, "node": "uav2"}]}})
     agents = [_agent("uav0", {"uav1": 12.3, "uav2": 19.9}), _agent("uav3", {"uav2": 19.5}),
               {"id": "uav1", "status": "died: no metrics written"}, _agent("uav2", {"uav0": 19.9})]
@@ -62,3 +63,22 @@ def test_a_death_names_its_cause():
 def test_no_losses_no_entries(tmp_path):
     """A run without deaths or node_loss events (no deaths file at all: a lockstep run) reports none."""
     assert losses(tmp_path, _Scenario({}), [_agent("uav0", {})]) == []
+
+
+def test_a_lost_agents_target_is_taken_over_by_a_survivor(tmp_path):
+    """The running fleet (lockstep, 3 agents, the default scenario's CBBA assignment): uav1 serves the car when
+    its radio goes dark at t = 12 s. Each survivor releases uav1's claims ``peer_timeout`` (5 s) after it last
+    heard of it, and one of them serves the car within a second after that; no survivor believes uav1 serves
+    anything afterwards."""
+    scenario = load("default", agents=3, duration=24.0,
+                    radio={"topology": "full", "events": [{"t": 12.0, "kind": "node_loss", "node": "uav1"}]})
+    agents = {a["id"]: a for a in run_lockstep(scenario, tmp_path)["agents"]}
+    before = [served for t, served in agents["uav0"]["assignment"]["timeline"] if t < 12.0][-1]
+    assert before.get("car") == "uav1", before  # the setting of the test: uav1 held the car
+    for survivor in ("uav0", "uav2"):
+        assignment = agents[survivor]["assignment"]
+        ((t_expired, who),) = assignment["expired"]
+        assert who == "uav1" and 16.0 < t_expired <= 17.5, assignment["expired"]
+        after = [(t, served) for t, served in assignment["timeline"] if t > t_expired]
+        assert after and all("uav1" not in served.values() for _, served in after)
+        assert any(served.get("car") in ("uav0", "uav2") for t, served in after if t <= t_expired + 1.0), after

@@ -158,6 +158,7 @@ def test_agreement_weighs_time_and_times_how_fast_changes_settle():
     ({"planner": "assignment", "search_value": 20.0}, "search_value"),  # searching worth more than a target
     ({"planner": "assignment", "orbit_radius": -1.0}, "orbit_radius"),
     ({"planner": "assignment", "capacity": 1.5}, "wrong type"),
+    ({"planner": "assignment", "peer_timeout": 0.0}, "peer_timeout"),  # every peer would be expired at once
 ])
 def test_bad_tasking_sections_are_refused_when_the_scenario_is_read(section, match):
     with pytest.raises(ValueError, match=match):

@@ -177,3 +177,31 @@ def test_vanished_tasks_leave_the_bundle():
 def test_bad_input_is_refused(bad, match):
     with pytest.raises(ValueError, match=match):
         bad()
+
+
+def test_a_silent_vehicle_loses_its_claims_after_the_timeout():
+    """A vehicle that crashed holding a task: once nobody has heard of it for ``timeout`` seconds its claim is
+    released and the survivor wins the task; a vehicle heard of through a neighbour within the timeout keeps its
+    claim; a claim relayed later with the same stale stamp is expired again."""
+    tasks = {"a": Task("a", (0.0, 0.0), 10.0), "b": Task("b", (100.0, 0.0), 10.0)}
+    dead = CBBA("dead", 1)
+    dead.build(tasks, path_score(Capability((0.0, 0.0), 10.0, (0.0, 0.0)), 0.95))
+    survivor = CBBA("alive", 1)
+    survivor.merge("dead", dead.message(0.0), received=0.0)
+    survivor.build(tasks, path_score(Capability((1.0, 0.0), 10.0, (0.0, 0.0)), 0.95))
+    assert survivor.winners["a"] == "dead" and survivor.path == ["b"]
+    assert survivor.expire(4.9, timeout=5.0) == []  # heard of 4.9 s ago: still alive
+    assert survivor.expire(5.1, timeout=5.0) == ["dead"]
+    assert "a" not in survivor.winners and "dead" not in survivor.stamps
+    survivor.rebuild(tasks, path_score(Capability((1.0, 0.0), 10.0, (0.0, 0.0)), 0.95))
+    assert survivor.path == ["a"]  # the nearer task, no longer claimed
+    stale = Bids({"a": ("dead", 50.0)}, {"dead": 0.0, "relay": 6.0})
+    survivor.merge("relay", stale, received=6.0)  # a neighbour still holding the dead vehicle's claim
+    survivor.expire(6.0, timeout=5.0)
+    assert survivor.winners.get("a") != "dead"
+
+
+def test_expire_needs_a_positive_timeout():
+    """Bad input: a zero timeout would expire every vehicle at once."""
+    with pytest.raises(ValueError, match="timeout"):
+        CBBA("me", 1).expire(1.0, timeout=0.0)
