@@ -70,8 +70,11 @@ class AgentScenario:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
-        if int(self.agents) != self.agents or self.agents < 1:
+        if isinstance(self.agents, bool) or not isinstance(self.agents, int) or self.agents < 1:
             raise ValueError(f"agents must be a positive integer, got {self.agents!r}")
+        check_seed(self.seed)
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
         grid = {"grid"} if self.grid is not None else set()
         check_tasking(self.tasking, frozenset({"track", "tasks"} | grid))  # "tasks": built for the assignment
 
@@ -94,6 +97,9 @@ class AgentScenario:
         for number in ("duration", "rate_hz", "altitude"):
             if number in kwargs:
                 kwargs[number] = _number(kwargs[number], number)
+        for section in ("area", "origin", "terrain", "vehicle", "tasking", "sensor", "tracking", "sending", "grid"):
+            if section in d and not isinstance(d[section], dict):
+                raise ValueError(f"[{section}] must be a table of settings, got {d[section]!r}")
         if "area" in d:
             kwargs["area"] = Area(tuple(map(float, d["area"]["north"])), tuple(map(float, d["area"]["east"])))
         if "origin" in d:
@@ -113,6 +119,13 @@ class AgentScenario:
         if d.get("radio_plan") is not None:
             kwargs["radio_plan"] = LinkPlan.from_dict(d["radio_plan"])
         return cls(**kwargs)
+
+
+def check_seed(seed) -> int:
+    """A random seed: an integer in [0, 2**32) (numpy's and the launcher's range). Returns it."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        raise ValueError(f"seed must be an integer in [0, 2**32), got {seed!r}")
+    return seed
 
 
 def read_scenario_file(path: str | Path) -> dict:

@@ -173,7 +173,7 @@ def _bench(args) -> int:
 
 
 def _run(args) -> int:
-    from mesh_sim.launcher import Launcher, new_run_dir
+    from mesh_sim.launcher import Launcher, run_folder
     from mesh_sim.lockstep import run_lockstep
     from mesh_sim.results import grid_table, summary_table
     from mesh_sim.scenario import load
@@ -189,17 +189,17 @@ def _run(args) -> int:
     try:
         scenario = load(args.scenario, **overrides)
         cameras = _cameras(args.camera, scenario.agent.agents)
-        run_dir = new_run_dir(args.out, scenario.name)
-        if args.lockstep:
-            if args.rerun not in ("save", "off"):
-                raise ValueError("--lockstep records with --rerun save or off")
-            if args.vehicle != "kinematic":
-                raise ValueError("--lockstep flies the kinematic models (the autopilots run on the wall clock)")
-            metrics, status = run_lockstep(scenario, run_dir, rerun=args.rerun, cameras=cameras), "completed"
-        else:
-            outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console,
-                               cameras=cameras, vehicle=args.vehicle).run()
-            metrics, status = outcome.metrics, outcome.status
+        with run_folder(args.out, scenario.name) as run_dir:
+            if args.lockstep:
+                if args.rerun not in ("save", "off"):
+                    raise ValueError("--lockstep records with --rerun save or off")
+                if args.vehicle != "kinematic":
+                    raise ValueError("--lockstep flies the kinematic models (the autopilots run on the wall clock)")
+                metrics, status = run_lockstep(scenario, run_dir, rerun=args.rerun, cameras=cameras), "completed"
+            else:
+                outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console,
+                                   cameras=cameras, vehicle=args.vehicle).run()
+                metrics, status = outcome.metrics, outcome.status
     except (ValueError, OSError) as err:
         print(f"skymesh run: {err}", file=sys.stderr)
         return EXIT_USAGE

@@ -23,12 +23,15 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
 import time
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -102,6 +105,20 @@ def new_run_dir(base: Path, name: str) -> Path:
     path = base / f"{name}-{stamp}-{uuid.uuid4().hex[:4]}"
     path.mkdir(parents=True)
     return path
+
+
+@contextmanager
+def run_folder(base: Path, name: str) -> Iterator[Path]:
+    """A new run folder (:func:`new_run_dir`) that is removed again, with whatever was written to it, when the
+    run raises before it could write its metrics (a bad setting found late, a full disk): a failed start leaves
+    no half-written folder behind. A run that ends — completed, failed or interrupted — keeps its folder."""
+    path = new_run_dir(base, name)
+    try:
+        yield path
+    except BaseException:
+        if not (path / "metrics.json").exists():
+            shutil.rmtree(path, ignore_errors=True)
+        raise
 
 
 class Launcher:

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent.config import AgentScenario, read_scenario_file
+from agent.config import AgentScenario, check_seed, read_scenario_file
 from agent.net.fire_truth import decoy
 from mesh_sim.fire import FireConfig
 from mesh_sim.radio import compile_plan
@@ -104,7 +104,7 @@ def load(name_or_path: str, **overrides) -> Scenario:
     try:
         if "radio" in raw:
             agents = [f"uav{i}" for i in range(int(raw.get("agents", AgentScenario.agents)))]
-            raw["radio_plan"] = compile_plan(raw["radio"], agents, int(raw.get("seed", AgentScenario.seed)))
+            raw["radio_plan"] = compile_plan(raw["radio"], agents, check_seed(raw.get("seed", AgentScenario.seed)))
         agent = AgentScenario.from_dict(raw)
         targets = targets_from_config(raw.get("targets", []), terrain_from_config(agent.terrain))
         fire = FireConfig.from_dict(raw["fire"], agent.area.as_tuple()) if "fire" in raw else None
