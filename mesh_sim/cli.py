@@ -40,6 +40,7 @@ from mesh_sim.bench import BENCHMARKS
 from mesh_sim.bench.common import make_console, write_json
 
 EXIT_USAGE = 2
+STOPPED_BY = {"interrupted": 130, "terminated": 143}  # a run stopped by SIGINT / SIGTERM: 128 + the signal
 BENCH_OPTIONS = ("sizes", "sensor")  # benchmark options beyond --quick and --json, for the benchmarks naming them
 
 
@@ -210,8 +211,8 @@ def _run(args) -> int:
                   + (", logs/" if not args.lockstep else "")
                   + (", recording.rrd: open with `rerun recording.rrd`" if args.rerun == "save" else "") + ")",
                   highlight=False)
-    if status == "interrupted":
-        return 130
+    if status in STOPPED_BY:
+        return STOPPED_BY[status]
     return 0 if status == "completed" else 1
 
 

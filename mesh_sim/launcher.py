@@ -28,6 +28,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from collections.abc import Iterator
@@ -93,6 +94,28 @@ class RunOutcome:
     deaths: list[Death] = field(default_factory=list)  # children that died while the run went on
 
 
+class _Terminated(Exception):
+    """SIGTERM arrived: stop the run as Ctrl-C would, and keep its results."""
+
+
+@contextmanager
+def _sigterm_raises() -> Iterator[None]:
+    """While inside, SIGTERM raises :class:`_Terminated` in the main thread (a launcher run from another thread
+    keeps the default handler: Python delivers signals to the main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise _Terminated
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def free_port() -> int:
     """A TCP port on loopback that was free a moment ago (the OS picks it)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
@@ -150,6 +173,8 @@ class Launcher:
 
     # -- lifecycle --------------------------------------------------------------------------------
     def run(self) -> RunOutcome:
+        """Run the team; on completion, on Ctrl-C (status ``interrupted``) and on SIGTERM (``terminated``) the
+        children are stopped and the metrics of what ran are written."""
         scenario_file = self.run_dir / "scenario.json"
         scenario_file.write_text(json.dumps(self.scenario.raw, indent=2))
         (self.run_dir / "logs").mkdir(exist_ok=True)
@@ -157,11 +182,14 @@ class Launcher:
         router = zenoh.open(router_config([endpoint]))
         status = "completed"
         try:
-            self._start_all(scenario_file, endpoint)
-            epoch = self._release()
-            status = self._monitor(epoch) if isinstance(epoch, float) else epoch
+            with _sigterm_raises():
+                self._start_all(scenario_file, endpoint)
+                epoch = self._release()
+                status = self._monitor(epoch) if isinstance(epoch, float) else epoch
         except KeyboardInterrupt:
             status = "interrupted"
+        except _Terminated:
+            status = "terminated"
         finally:
             self._stop_all()
             router.close()

@@ -109,6 +109,36 @@ def test_killing_an_agent_loses_only_that_agent(tmp_path):
 
 
 @pytest.mark.slow
+def test_sigterm_stops_the_run_and_keeps_its_results(tmp_path):
+    """Bad event (reliability audit: "SIGTERM: results lost"): `skymesh run` gets SIGTERM mid-run. It stops its
+    children, writes the metrics of what ran with the status "terminated" and exits with 143 (128 + 15)."""
+    cmd = [sys.executable, "-m", "mesh_sim.cli", "run", "--agents", "2", "--duration", "60", "--rerun", "off",
+           "--out", str(tmp_path)]
+    launcher = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    children = []
+    try:
+        deadline = time.time() + 60
+        while time.time() < deadline and not list(tmp_path.glob("*/epoch")):
+            time.sleep(0.2)
+        children = psutil.Process(launcher.pid).children()
+        time.sleep(3.0)
+        launcher.send_signal(signal.SIGTERM)
+        assert launcher.wait(timeout=30) == 143
+        (metrics,) = tmp_path.glob("*/metrics.json")
+        data = json.loads(metrics.read_text())
+        assert data["status"] == "terminated"
+        assert all(a.get("steps", 0) > 0 for a in data["agents"]), data["agents"]
+        assert_all_gone([c.pid for c in children], timeout=20)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+            launcher.wait()
+        for child in children:
+            if child.is_running():
+                child.kill()
+
+
+@pytest.mark.slow
 def test_children_exit_when_the_launcher_is_killed(tmp_path):
     """Bad event: the launcher itself is SIGKILLed. Its children must not become orphans."""
     cmd = [sys.executable, "-m", "mesh_sim.cli", "run", "--agents", "3", "--duration", "60", "--rerun", "off",
