@@ -61,6 +61,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--connect", action="append", default=[], help="Zenoh router endpoint, e.g. tcp/127.0.0.1:7447")
     p.add_argument("--zenoh-config", help="a Zenoh JSON5 config file (instead of --connect)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--incarnation", type=int, default=0,
+                   help="this life of the agent: a restarted agent gets the next one (agent.net.incarnation)")
     p.add_argument("--epoch", type=float, default=None, help="wall time of simulation t=0 (default: now)")
     p.add_argument("--speed", type=float, default=1.0, help="simulation seconds per wall second")
     p.add_argument("--duration", type=float, default=None, help="override the scenario duration [s]")
@@ -114,7 +116,8 @@ def main(argv=None) -> int:
     subscribe = keys.agent_subscriptions()
     transport = ZenohTransport(args.id, keys, config, subscribe)
     try:
-        agent = Agent(args.id, args.index, scenario, transport, keys, seed=args.seed, fleet_key=key, camera=camera)
+        agent = Agent(args.id, args.index, scenario, transport, keys, seed=args.seed, fleet_key=key, camera=camera,
+                      incarnation=args.incarnation)
     except (VehicleError, ValueError) as err:  # a vehicle that cannot fly: nothing has run yet
         transport.close()
         print(f"agent {args.id}: {err}", file=sys.stderr)
@@ -133,7 +136,8 @@ def main(argv=None) -> int:
     finally:
         transport.close()
         agent.close()
-    metrics = {"pid": os.getpid(), **agent.metrics(), **stats.as_dict(), "transport_dropped": transport.dropped}
+    metrics = {"pid": os.getpid(), "incarnation": args.incarnation, **agent.metrics(), **stats.as_dict(),
+               "transport_dropped": transport.dropped}
     try:
         write_json(Path(args.out) / f"agent-{args.id}.json", metrics)
     except OSError as err:

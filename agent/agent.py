@@ -7,13 +7,13 @@ ground station and topology reports to the peers (when due); every exchange offe
 the link budget here; the planner turns the exchanges' views into a goal for the vehicle and the sensors
 (``look_at``). The loop names no implementation: sensors, exchanges, planners and vehicles come from their registries.
 
-It knows nothing of clocks or processes: the live harness (``agent.runtime``) calls it on the wall clock
-over Zenoh; the lockstep harness calls it over an in-memory bus. Only the transport and the clock differ.
-With a radio plan the transport is wrapped in the emulated radio (:class:`agent.net.radio.RadioTransport`).
+It knows nothing of clocks or processes: the live harness (``agent.runtime``) calls it on the wall clock over Zenoh,
+the lockstep harness over an in-memory bus (with a radio plan wrapped in :class:`agent.net.radio.RadioTransport`).
 
 Every received message is decoded and validated (``agent.net.wire``) before it touches a belief; a
 rejected message is counted by reason and logged once per (peer, reason). Duplicates and messages older
-than the last one from the same origin are dropped by ``(origin, kind, seq)``.
+than the last one from the same origin are dropped by ``(origin, kind, seq)``; a peer's new incarnation (a
+restart, :mod:`agent.net.incarnation`) resets what the exchanges assumed they shared with it.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from agent.beliefs import EXCHANGES, ExchangeContext
 from agent.config import AgentScenario
 from agent.fusion_log import FusionLog
 from agent.net import wire
+from agent.net.incarnation import ReceiveWindow, first_number
 from agent.net.keys import Incoming, Keys
 from agent.net.link_emulator import LinkEmulator
 from agent.net.radio import RadioTransport
@@ -45,7 +46,7 @@ class Agent:
     source replacing the synthetic camera. ``lockstep``: no wall-clock deadline (the planner may await its solves)."""
 
     def __init__(self, agent_id: str, index: int, scenario: AgentScenario, transport, keys: Keys,
-                 seed: int, fleet_key: bytes | None = None, camera=None, lockstep: bool = False):
+                 seed: int, fleet_key: bytes | None = None, camera=None, lockstep: bool = False, incarnation: int = 0):
         self.id, self.index, self.scenario, self.keys, self.fleet_key = agent_id, index, scenario, keys, fleet_key
         self.terrain = terrain_from_config(scenario.terrain)
         self.vehicle = vehicle_from_config(scenario.vehicle, scenario.start_position(index), 0.0, scenario.origin)
@@ -58,7 +59,7 @@ class Agent:
         self.exchanges: dict = {}
         self.views = Views(self.exchanges)  # filled below; exchanges and planner read each other's views through it
         context = ExchangeContext(agent_id, scenario, self.terrain, seed, self.sender, self, self.unused,
-                                  self.topology, self.views, self.vehicle)
+                                  self.topology, self.views, self.vehicle, incarnation)
         built = {kind: build(context) for kind, build in EXCHANGES.items()}
         self.exchanges.update((kind, exchange) for kind, exchange in built.items() if exchange is not None)
         self.extra_sensors = [s for exchange in self.exchanges.values() for s in exchange.sensors()]
@@ -78,8 +79,9 @@ class Agent:
         self.bytes_rx: Counter = Counter()  # (peer, kind) -> bytes
         self.rejected: Counter = Counter()  # reason -> messages
         self.fusions = FusionLog(silence_s=2 * scenario.sending.max_silence)
-        self.telemetry_thinned = self.steps = self._seq = 0
-        self._last_seq: dict[tuple[str, str], int] = {}  # (origin, kind) -> last seq accepted
+        self.telemetry_thinned = self.steps = 0
+        self._seq = first_number(incarnation)  # agent.net.incarnation: a restarted agent's numbers are all newer
+        self.window = ReceiveWindow()
         self._logged: set[tuple[str, str]] = set()
 
     @property
@@ -137,14 +139,16 @@ class Agent:
             env = wire.decode(item.data, expected_origin=origin, key=self.fleet_key, kinds=self.kinds)
         except wire.DecodeError as err:
             return self._reject(origin or "world", err.reason)
-        seen = self._last_seq.get((env.origin, env.kind))
-        if seen is not None and env.seq <= seen:
+        verdict = self.window.admit(env.origin, env.kind, env.seq, t)
+        if verdict == "duplicate":
             return self._reject(env.origin, "duplicate", log_it=False)
+        for exchange in self.exchanges.values() if verdict == "restarted" else ():  # it holds nothing of ours now
+            getattr(exchange, "peer_restarted", lambda peer: None)(env.origin)
         try:
             self._use(env, len(item.data), t)
         except wire.DecodeError as err:
             return self._reject(env.origin, err.reason)
-        self._last_seq[(env.origin, env.kind)] = env.seq  # only a message that was used moves the window
+        self.window.used(env.origin, env.kind, env.seq)
 
     def _use(self, env: wire.Envelope, size: int, t: float) -> None:
         """Apply a decoded message: truth to the intake, beliefs to the exchange of their kind."""
@@ -224,21 +228,17 @@ class Agent:
         out = {
             "id": self.id,
             "steps": self.steps,
-            "bytes_tx": int(sum(self.bytes_tx.values())),
-            "bytes_rx": int(sum(self.bytes_rx.values())),
-            "bytes_tx_by_kind": dict(self.bytes_tx),
-            "sim_bytes_tx_by_kind": dict(self.sim_bytes_tx),
+            "bytes_tx": int(sum(self.bytes_tx.values())), "bytes_rx": int(sum(self.bytes_rx.values())),
+            "bytes_tx_by_kind": dict(self.bytes_tx), "sim_bytes_tx_by_kind": dict(self.sim_bytes_tx),
             "bytes_rx_by_peer": _by_peer(self.bytes_rx),
             "msgs_rejected": int(sum(v for k, v in self.rejected.items() if k != "duplicate")),
-            "rejected_by_reason": dict(self.rejected),
-            **self.fusions.metrics(),
+            "rejected_by_reason": dict(self.rejected), **self.fusions.metrics(),
             "radio_drops": _by_peer(drops),
             "radio_drops_by_cause": dict(Counter(cause for (_, cause) in drops.elements())),
             "telemetry_thinned": self.telemetry_thinned,
-            "sensor": sensor,
-            "sensor_outcomes": dict(Counter(sensor["outcomes"]) + self.unused),
+            "sensor": sensor, "sensor_outcomes": dict(Counter(sensor["outcomes"]) + self.unused),
         }
-        for part in (*self.exchanges.values(), self.planner, self.vehicle, self.topology):  # metrics are optional
+        for part in (*self.exchanges.values(), self.planner, self.vehicle, self.topology, self.window):  # optional
             out.update(getattr(part, "metrics", dict)())
         return out
 

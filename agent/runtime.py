@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import resource
 import signal
@@ -102,7 +103,8 @@ def staggered_phase(index: int, count: int, dt: float) -> float:
 
 def run_steps(step_fn, clock: SimClock, dt: float, duration: float, stop: threading.Event,
               parent_pid: int | None = None, phase: float = 0.0) -> LoopStats:
-    """Call ``step_fn(t)`` at ``t = k dt`` on ``clock`` until ``duration``, ``stop`` or orphaning; each call is
+    """Call ``step_fn(t)`` at ``t = k dt`` on ``clock`` until ``duration``, ``stop`` or orphaning, from the first
+    grid time not yet past (0 at a normal start, the present for a process restarted mid-run); each call is
     made ``phase`` simulation seconds after its grid time (``0 <= phase < dt``, :func:`staggered_phase`), and
     its deadline is the next call's time.
 
@@ -112,7 +114,7 @@ def run_steps(step_fn, clock: SimClock, dt: float, duration: float, stop: thread
         raise ValueError(f"phase must be in [0, dt = {dt}), got {phase}")
     stats = LoopStats()
     parent = os.getppid() if parent_pid is None else parent_pid
-    k = 0
+    k = max(0, math.floor((clock.now() - phase) / dt))  # a process started mid-run (a restart) joins the present
     while not stop.is_set() and k * dt <= duration + 1e-9:
         t = k * dt
         delay = clock.wall(t + phase) - time.time()

@@ -95,6 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
         run.add_argument("--vehicle", choices=["kinematic", "mavlink"], default="kinematic",
                          help="kinematic: each agent flies its own model; mavlink: a skymesh autopilot per agent, "
                               "flown over MAVLink UDP (live runs at --speed 1)")
+        run.add_argument("--restart", action="store_true",
+                         help="start an agent that dies again, as its next incarnation (live runs)")
         run.add_argument("--camera", action="append", default=[], metavar="AGENT=SOURCE",
                          help="replace an agent's synthetic camera with an OpenCV source (file, device index, URL), "
                               "e.g. uav0=clip.avi; repeatable")
@@ -196,10 +198,12 @@ def _run(args) -> int:
                     raise ValueError("--lockstep records with --rerun save or off")
                 if args.vehicle != "kinematic":
                     raise ValueError("--lockstep flies the kinematic models (the autopilots run on the wall clock)")
+                if args.restart:
+                    raise ValueError("--restart is for live runs: lockstep agents do not die")
                 metrics, status = run_lockstep(scenario, run_dir, rerun=args.rerun, cameras=cameras), "completed"
             else:
                 outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console,
-                                   cameras=cameras, vehicle=args.vehicle).run()
+                                   cameras=cameras, vehicle=args.vehicle, restart=args.restart).run()
                 metrics, status = outcome.metrics, outcome.status
     except (ValueError, OSError) as err:
         print(f"skymesh run: {err}", file=sys.stderr)

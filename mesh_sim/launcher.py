@@ -58,6 +58,8 @@ class Child:
     process: subprocess.Popen
     log_path: Path
     started: float  # wall time just before the spawn [s since the Unix epoch]
+    args: list[str] = field(default_factory=list)  # what it was started with (a restart starts it again so)
+    incarnation: int = 0  # agent.net.incarnation: 0, then one more per restart
 
 
 @dataclass(frozen=True)
@@ -69,6 +71,7 @@ class Death:
     pid: int
     exit_code: int  # negative: killed by that signal (subprocess's convention)
     t: float  # simulation seconds when the launcher saw it
+    restarted_as: int | None = None  # the incarnation of the agent started in its place (--restart)
 
     @property
     def cause(self) -> str:
@@ -81,7 +84,7 @@ class Death:
 
     def to_dict(self) -> dict:
         return {"agent" if self.role == "agent" else "process": self.name, "role": self.role, "pid": self.pid,
-                "exit_code": self.exit_code, "cause": self.cause, "t": self.t}
+                "exit_code": self.exit_code, "cause": self.cause, "t": self.t, "restarted_as": self.restarted_as}
 
 
 @dataclass
@@ -147,7 +150,7 @@ def run_folder(base: Path, name: str) -> Iterator[Path]:
 class Launcher:
     def __init__(self, scenario: Scenario, run_dir: Path, speed: float = 1.0, rerun: str = "save",
                  console: Console | None = None, extra_env: dict | None = None, cameras: dict | None = None,
-                 vehicle: str = "kinematic"):
+                 vehicle: str = "kinematic", restart: bool = False):
         if not speed > 0:
             raise ValueError(f"--speed must be positive, got {speed}")
         if vehicle not in VEHICLES:
@@ -167,6 +170,7 @@ class Launcher:
         self.fleet = f"{scenario.name}-{uuid.uuid4().hex[:8]}"
         self.cameras = dict(cameras or {})  # agent name -> OpenCV video source replacing its synthetic camera
         self.vehicle = vehicle
+        self.restart = restart  # start a dead agent again, as its next incarnation
         self.children: list[Child] = []
         self.startup_s: dict[str, float] = {}
         self.deaths: list[Death] = []
@@ -195,7 +199,8 @@ class Launcher:
             router.close()
         write_json(self.run_dir / results.DEATHS_FILE, [d.to_dict() for d in self.deaths])
         metrics = results.collect(self.run_dir, self.scenario, status, self.speed)
-        return RunOutcome(self.run_dir, status, metrics, {c.name: c.process.pid for c in self.children},
+        pids = {c.name if c.incarnation == 0 else f"{c.name}.{c.incarnation}": c.process.pid for c in self.children}
+        return RunOutcome(self.run_dir, status, metrics, pids,
                           dict(self.startup_s), list(self.deaths))
 
     @property
@@ -269,13 +274,13 @@ class Launcher:
         ])
         return ["--mavlink", f"udpin:127.0.0.1:{listen}"]
 
-    def _spawn(self, name: str, role: str, args: list[str]) -> None:
-        log_path = self.run_dir / "logs" / f"{name}.log"
+    def _spawn(self, name: str, role: str, args: list[str], incarnation: int = 0) -> None:
+        log_path = self.run_dir / "logs" / (f"{name}.log" if incarnation == 0 else f"{name}.{incarnation}.log")
         started = time.time()
         with open(log_path, "wb") as log:
             proc = subprocess.Popen([sys.executable, *args], stdout=log, stderr=subprocess.STDOUT,
                                     stdin=subprocess.DEVNULL, env=self.env)
-        self.children.append(Child(name, role, proc, log_path, started))
+        self.children.append(Child(name, role, proc, log_path, started, list(args), incarnation))
 
     def _monitor(self, epoch: float) -> str:
         """Wait for the agents to finish; return the run's status. A dead agent, observer or autopilot is
@@ -290,7 +295,7 @@ class Launcher:
                 time.sleep(0.2)
                 sim_t = max(0.0, (time.time() - epoch) * self.speed)
                 progress.update(task, completed=min(sim_t, duration))
-                for child in self.children:
+                for child in list(self.children):  # a restart adds one
                     code = child.process.poll()
                     if code is None or (code == 0 and child.role == "agent") or self._dead(child):
                         continue
@@ -304,14 +309,20 @@ class Launcher:
                     return "completed" if any(c.process.poll() == 0 for c in agents) else "failed: every agent died"
 
     def _dead(self, child: Child) -> bool:
-        return any(d.name == child.name for d in self.deaths)
+        return any(d.pid == child.process.pid for d in self.deaths)
 
     def _record_death(self, child: Child, code: int, t: float) -> None:
-        death = Death(child.name, child.role, child.process.pid, code, round(t, 3))
+        again = self.restart and child.role == "agent" and t < self.scenario.agent.duration
+        death = Death(child.name, child.role, child.process.pid, code, round(t, 3),
+                      child.incarnation + 1 if again else None)
         self.deaths.append(death)
+        if again:  # a new life: peers reset their channels to it (agent.net.incarnation)
+            self._spawn(child.name, child.role, [*child.args, "--incarnation", str(death.restarted_as)],
+                        death.restarted_as)
         alive = sum(c.process.poll() is None for c in self.children if c.role == "agent")
+        then = f"restarted as incarnation {death.restarted_as}" if again else "the run goes on"
         self.console.print(f"[yellow]{child.name} (pid {death.pid}) died at t = {t:.1f} s ({death.cause}); "
-                           f"the run goes on with {alive} agent{'s' * (alive != 1)}")
+                           f"{then} with {alive} agent{'s' * (alive != 1)}")
 
     def _stop_all(self) -> None:
         """SIGTERM every child still running (by PID), wait, then SIGKILL the stragglers (by PID)."""

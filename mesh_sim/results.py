@@ -38,18 +38,30 @@ def losses(run_dir: Path, scenario, agents: list[dict]) -> list[dict]:
     (:mod:`mesh_sim.radio`) and the agent processes that died (the launcher's :data:`DEATHS_FILE`). Each
     loss says when (simulation seconds) and why, and how long each survivor took to notice it:
     ``last heard + neighbour timeout - t`` (:meth:`agent.net.topology.Topology.metrics`; ``None`` for a
-    survivor that never heard the lost agent)."""
+    survivor that never heard the lost agent). An agent started again (``skymesh run --restart``) says instead
+    how long after its death each survivor first heard its new incarnation (``rejoined_after``,
+    :class:`agent.net.incarnation.ReceiveWindow`)."""
     plan = scenario.raw.get("radio_plan") or {}
     lost = [{"agent": d["node"], "t": float(d["t"]), "cause": "node_loss"} for d in plan.get("down_nodes", [])]
     lost += [{"agent": d["agent"], "t": float(d["t"]), "cause": d["cause"], "pid": d["pid"],
-              "exit_code": d["exit_code"]} for d in (_read(run_dir / DEATHS_FILE) or []) if d.get("role") == "agent"]
-    gone = {loss["agent"] for loss in lost}
+              "exit_code": d["exit_code"], "restarted_as": d.get("restarted_as")}
+             for d in (_read(run_dir / DEATHS_FILE) or []) if d.get("role") == "agent"]
+    gone = {loss["agent"] for loss in lost if loss.get("restarted_as") is None}
     for loss in lost:
-        loss["detected_after"] = {
-            a["id"]: (None if loss["agent"] not in a["peers_last_heard"]
-                      else max(0.0, a["peers_last_heard"][loss["agent"]] + a["neighbour_timeout"] - loss["t"]))
-            for a in agents if a["id"] not in gone and "peers_last_heard" in a}
+        survivors = [a for a in agents if a["id"] not in gone | {loss["agent"]} and "peers_last_heard" in a]
+        if loss.get("restarted_as") is None:
+            loss["detected_after"] = {a["id"]: _noticed(a, loss) for a in survivors}
+        else:
+            loss["rejoined_after"] = {a["id"]: next((t - loss["t"] for peer, n, t in a.get("peer_restarts", [])
+                                                     if peer == loss["agent"] and n == loss["restarted_as"]), None)
+                                      for a in survivors}
     return lost
+
+
+def _noticed(survivor: dict, loss: dict) -> float | None:
+    """Seconds from a loss until ``survivor`` dropped the lost agent from its neighbours."""
+    heard = survivor["peers_last_heard"].get(loss["agent"])
+    return None if heard is None else max(0.0, heard + survivor["neighbour_timeout"] - loss["t"])
 
 
 def _read(path: Path) -> dict | list | None:
@@ -205,7 +217,13 @@ def summary_table(metrics: dict) -> Table:
 
 
 def _loss_caption(loss: dict) -> str:
-    """One lost agent under the table: when, why, and how long the survivors took to notice."""
+    """One lost agent under the table: when, why, and how long the survivors took to notice (or to hear its
+    next incarnation)."""
+    if loss.get("restarted_as") is not None:
+        heard = [s for s in loss["rejoined_after"].values() if s is not None]
+        after = f", heard by every survivor within {max(heard):.1f} s" if len(heard) == len(loss["rejoined_after"]) \
+            and heard else ""
+        return f"{loss['agent']} died at t = {loss['t']:.1f} s ({loss['cause']}), restarted{after}"
     noticed = [s for s in loss["detected_after"].values() if s is not None]
     after = f"; the survivors noticed within {max(noticed):.1f} s" if noticed else ""
     return f"{loss['agent']} lost at t = {loss['t']:.1f} s ({loss['cause']}){after}"

@@ -37,13 +37,14 @@ class ExchangeContext:
     topology: object  # agent.net.topology.Topology: who hears whom, as the agent knows it
     views: object = None  # agent.plugins.Views: the other exchanges' views (filled once all are built)
     vehicle: object = None  # agent.vehicles.base.Vehicle: where this agent is
+    incarnation: int = 0  # this life of the agent (agent.net.incarnation): a restarted agent numbers on from it
 
 
 def _tracks(ctx: ExchangeContext) -> TrackExchange:
     sc = ctx.scenario
     args = (ctx.me, sc.tracking, sc.step, ctx.terrain, ctx.seed, ctx.sender, ctx.outbox, ctx.unused)
     if sc.tracking.policy == "flood":
-        return FloodExchange(*args, topology=ctx.topology)
+        return FloodExchange(*args, topology=ctx.topology, incarnation=ctx.incarnation)
     return TrackExchange(*args)
 
 

@@ -26,6 +26,7 @@ from agent.beliefs.bearing_codec import bearings_from_table, check_bearings, enc
 from agent.beliefs.tracks import FUTURE_EPOCHS, TrackExchange
 from agent.net import wire
 from agent.net.flood_relay import FloodRelay, acks_from_wire
+from agent.net.incarnation import first_number
 from agent.plugins import Observations, Outgoing
 from agent.sensors.bearing import Bearing
 from fusion.resync import Edge
@@ -34,11 +35,12 @@ from fusion.resync import Edge
 class FloodExchange(TrackExchange):
     """Tracks of one agent, built from every agent's detections; see the module docstring."""
 
-    def __init__(self, *args, topology, **kwargs):
+    def __init__(self, *args, topology, incarnation: int = 0, **kwargs):
         super().__init__(*args, **kwargs)
         self.topology = topology
         model = self.tracker.model
-        self.relay = FloodRelay(self.me, self.sender.config.ack_timeout, (model.window - 1) * model.step)
+        self.relay = FloodRelay(self.me, self.sender.config.ack_timeout, (model.window - 1) * model.step,
+                                first=first_number(incarnation))
         self.too_old = 0  # received detections that no longer fit the trajectory window
         self.held: list[list[Bearing]] = []  # this step's scans, applied by settle
 

@@ -167,6 +167,14 @@ class GridExchange:
         self.fusions[out.method] += 1
         return [(f"grid_{out.method}", out.cause)]
 
+    def peer_restarted(self, peer: str) -> None:
+        """A restarted peer (:mod:`agent.net.incarnation`) holds none of our grid messages and none of our
+        grid: its acknowledgements are forgotten (our next message to it is a keyframe) and its channel starts
+        afresh from the common prior."""
+        self.sender.held.pop(peer, None)
+        if peer in self.channels.neighbours():
+            self.channels.reset(peer)
+
     # -- views and results ------------------------------------------------------------------------
     def view(self) -> MapView:
         beta = self.grid.shape_parameters() if self.config.belief == "beta" else None

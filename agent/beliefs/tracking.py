@@ -464,6 +464,15 @@ class Tracker:
         track.belief, flags = track.channels.prepare_send(track.belief)
         return flags
 
+    def peer_restarted(self, peer: str) -> None:
+        """``peer`` started a new life (:mod:`agent.net.incarnation`): its track ids mean nothing any more and
+        it holds nothing of ours, so its labels go and every channel to it starts afresh from the common prior
+        (:meth:`fusion.channel_filter.ChannelFilter.reset`, the case of a neighbour that restarted)."""
+        self.labels = {key: tid for key, tid in self.labels.items() if key[0] != peer}
+        for track in self.tracks.values():
+            if track.channels is not None and peer in track.channels.neighbours():  # flood keeps no channels
+                track.channels.reset(peer)
+
     def fuse_remote(self, peer: str, remote: list[RemoteTrack], seq: int, edge: Edge = Edge.TREE) -> list[Received]:
         """Fuse a peer's tracks from its message ``seq``."""
         results = []

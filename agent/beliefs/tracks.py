@@ -151,6 +151,10 @@ class TrackExchange:
         self.latencies.append(t - stamp)
         return methods
 
+    def peer_restarted(self, peer: str) -> None:
+        """A restarted peer: see :meth:`agent.beliefs.tracking.Tracker.peer_restarted`."""
+        self.tracker.peer_restarted(peer)
+
     def _decode(self, payload: dict) -> list[RemoteTrack]:
         tracks = payload.get("tracks")
         if not isinstance(tracks, list):

@@ -119,11 +119,11 @@ class FloodRelay:
     """The flooding state of one agent: its own increments and the ones it relays, with the neighbours'
     acknowledgements."""
 
-    def __init__(self, me: str, ack_timeout: float, horizon: float):
+    def __init__(self, me: str, ack_timeout: float, horizon: float, first: int = 0):
         if not ack_timeout > 0 or not horizon > 0:
             raise ValueError(f"ack_timeout and horizon must be positive, got {ack_timeout}, {horizon}")
         self.me, self.ack_timeout, self.horizon = me, ack_timeout, horizon
-        self._count = 0
+        self._count = first  # our increments' numbers start here: after a restart, above the old life's
         self._held: dict[tuple[str, int], Increment] = {}
         self._mine: dict[str, Held] = {}  # origin -> what this agent holds
         self._theirs: dict[str, dict[str, tuple[int, int]]] = {}  # neighbour -> origin -> (highest, mask) it acked

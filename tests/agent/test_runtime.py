@@ -57,3 +57,13 @@ def test_staggered_phases_spread_the_agents_evenly_over_one_step():
     for index, count in ((-1, 4), (0, 0)):
         with pytest.raises(ValueError, match="need 0 <= index and count >= 1"):
             staggered_phase(index, count, DT)
+
+
+def test_a_process_started_mid_run_joins_the_present():
+    """A restarted agent (skymesh run --restart) starts 30 simulated seconds into the run: its first step is at
+    the present grid time, not at t = 0 followed by a jump, and nothing before it counts as skipped."""
+    calls = []
+    clock = SimClock(time.time() - 30.0 / SPEED, SPEED)
+    stats = run_steps(calls.append, clock, DT, 30.0 + 3 * DT, threading.Event())
+    assert 29.0 <= calls[0] <= 30.0 and calls[0] == pytest.approx(round(calls[0] / DT) * DT)
+    assert stats.skipped_steps <= 1

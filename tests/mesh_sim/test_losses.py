@@ -50,8 +50,19 @@ def test_a_killed_process_and_a_node_loss_have_the_same_shape(tmp_path):
     assert emulated == {"agent": "uav2", "t": 20.0, "cause": "node_loss",
                         "detected_after": {"uav0": pytest.approx(2.9), "uav3": pytest.approx(2.5)}}
     assert killed == {"agent": "uav1", "t": 12.5, "cause": "killed by SIGKILL", "pid": 4242, "exit_code": -9,
-                      "detected_after": {"uav0": pytest.approx(2.8), "uav3": None}}
-    assert set(killed) - {"pid", "exit_code"} == set(emulated)
+                      "restarted_as": None, "detected_after": {"uav0": pytest.approx(2.8), "uav3": None}}
+    assert set(killed) - {"pid", "exit_code", "restarted_as"} == set(emulated)
+
+
+def test_a_restarted_agent_reports_when_each_survivor_heard_its_new_life(tmp_path):
+    """``skymesh run --restart``: uav1 died at 12.5 s and came back as incarnation 1; uav0 heard the new life
+    at 16 s, uav3 never did (None). It counts as no loss for the other losses' survivors."""
+    death = Death("uav1", "agent", 4242, -9, 12.5, restarted_as=1)
+    (tmp_path / DEATHS_FILE).write_text(json.dumps([death.to_dict()]))
+    agents = [{**_agent("uav0", {"uav1": 30.0}), "peer_restarts": [["uav1", 1, 16.0]]}, _agent("uav3", {}),
+              {**_agent("uav1", {"uav0": 30.0}), "incarnation": 1}]
+    (loss,) = losses(tmp_path, _Scenario({}), agents)
+    assert loss["rejoined_after"] == {"uav0": pytest.approx(3.5), "uav3": None} and "detected_after" not in loss
 
 
 def test_a_death_names_its_cause():
