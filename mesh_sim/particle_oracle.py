@@ -64,3 +64,17 @@ class ParticleOracle:
 
     def summary(self) -> dict:
         return {"resolved_s": self.resolution.summary(), "bearings": self.bearings, "rejected": self.rejected}
+
+
+def fleet_resolution(agents: list[dict], oracle: dict) -> dict[str, dict]:
+    """Per target, from a run's metrics (each agent's and the oracle's ``particles.resolved_s``): every
+    agent's time, the fleet's (the last agent's; ``None`` if one never got there), the oracle's, and the
+    ratio fleet ÷ oracle (``None`` if either is missing)."""
+    reference = oracle.get("particles", {}).get("resolved_s", {})
+    out = {}
+    for target, t_oracle in reference.items():
+        times = {a["id"]: a.get("particles", {}).get("resolved_s", {}).get(target) for a in agents}
+        fleet = None if not times or None in times.values() else max(times.values())
+        ratio = None if fleet is None or not t_oracle else fleet / t_oracle
+        out[target] = {"agents": times, "fleet_s": fleet, "oracle_s": t_oracle, "ratio": ratio}
+    return out
