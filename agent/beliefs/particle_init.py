@@ -15,7 +15,8 @@ Hand-over: once the set is one compact, Gaussian-like cloud (:meth:`fusion.parti
 and its position standard deviation is below ``handover_std``, its moment-matched Gaussian becomes the
 first position measurement of a trajectory track (Merino's suggestion of handing a converged particle
 belief to the information filter), which is then shared and fused like any other. A candidate that has
-not converged within ``candidate_lifetime`` seconds of its last update is dropped.
+not converged within ``candidate_lifetime`` seconds of its last update is dropped. With ``exchange = true``
+the candidates are also shared with the neighbours and fused with theirs (:mod:`agent.beliefs.particles`).
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ SCENARIO = "ambiguous"
 VARIANTS = (("exchange", True), ("alone", False))
 RATIO_GOAL = 1.5
 BYTES_GOAL = 3.0
-SEEDS, QUICK_SEEDS = 3, 1
+SEEDS, QUICK_SEEDS = 5, 1
 
 
 def lockstep(runs: Path, seed: int, exchange: bool) -> dict:
