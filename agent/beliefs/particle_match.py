@@ -7,6 +7,12 @@ mixture), at most ``gate``. Score of a gated pair: the log of the overlap ``∫ 
 our particles as ``log Σ_k w_k bel_j(x^(k))`` (the predictive likelihood the initiator uses for a bearing,
 Merino (5.33)-(5.34)). Pairs are taken best score first, each candidate at most once; a peer's candidate
 keeps its match (``labels``) while that pair still passes the gate.
+
+**Ambiguity** (chosen here): two look-alike targets seen from nearly one plane give two rays of a peer that
+both cross one ray of ours — at the target and at a ghost — with about the same overlap. Fusing either would
+make a compact belief, wrong half of the time, that the agent's own bearings (all on its ray) never refute.
+So a pair is fused only if its overlap beats every other gated pair of either candidate by ``AMBIGUITY``
+(a likelihood ratio); otherwise both wait until their own bearings or a third agent's set them apart.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from fusion.mixture import GaussianMixture
 from fusion.particles import ParticleSet
 
 TRACK_GATE = 16.27  # chi-square(3) 99.9 %: the tracker's track-to-track gate (TrackerConfig.track_gate)
+AMBIGUITY = 10.0  # overlap ratio of the best pair to any rival pair needed to fuse it (chosen here)
 
 
 def gate_distance(local: ParticleSet, remote: GaussianMixture) -> float:
@@ -48,7 +55,9 @@ def match(local: dict[int, ParticleSet], remote: dict[int, GaussianMixture], lab
         for lid, particles in local.items():
             if lid not in out.values() and gate_distance(particles, mixture) <= gate:
                 pairs.append((overlap(particles, mixture), rid, lid))
-    for _, rid, lid in sorted(pairs, reverse=True):
-        if rid not in out and lid not in out.values():
+    margin = np.log(AMBIGUITY)
+    for score, rid, lid in sorted(pairs, reverse=True):
+        rivals = [s for s, r, lo in pairs if (r == rid) != (lo == lid)]
+        if rid not in out and lid not in out.values() and all(score - s >= margin for s in rivals):
             out[rid] = lid
     return out

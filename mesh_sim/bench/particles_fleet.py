@@ -33,9 +33,10 @@ def lockstep(runs: Path, seed: int, exchange: bool) -> dict:
     """One lockstep run of the ambiguous scenario with the exchange on or off; its metrics."""
     from mesh_sim.launcher import new_run_dir
     from mesh_sim.lockstep import run_lockstep
-    from mesh_sim.scenario import load
+    from mesh_sim.scenario import load, read_scenario_file, resolve
 
-    loaded = load(SCENARIO, seed=seed, tracking={"particle_init": {"exchange": exchange}})
+    settings = read_scenario_file(resolve(SCENARIO))["tracking"].get("particle_init", {})  # kept, but exchange
+    loaded = load(SCENARIO, seed=seed, tracking={"particle_init": {**settings, "exchange": exchange}})
     return run_lockstep(loaded, new_run_dir(runs, f"{SCENARIO}-{seed}-{int(exchange)}"))
 
 

@@ -168,6 +168,18 @@ def test_matching_pairs_each_remote_candidate_with_the_overlapping_local_one():
     assert match(local, remote, {2: 9}) == {1: 9, 2: 7}  # a stale label outside the gate is dropped
 
 
+def test_a_ray_crossing_two_peer_candidates_alike_waits_and_a_clear_winner_is_fused():
+    """Two look-alike targets: our long ray (north) crosses two of a peer's candidates equally well —
+    fusing either would be a coin toss between the target and a ghost."""
+    rng = np.random.default_rng(4)
+    ray = {0: ParticleSet.from_states(rng.multivariate_normal(MU, np.diag([400.0, 1.0, 1.0]), 2000))}
+    twins = {1: GaussianMixture(np.ones(1), (MU + [-10, 0, 0])[None], np.eye(3)[None]),
+             2: GaussianMixture(np.ones(1), (MU + [10, 0, 0])[None], np.eye(3)[None])}
+    assert match(ray, twins, {}) == {}
+    off_ray = {**twins, 2: GaussianMixture(np.ones(1), (MU + [10, 4, 0])[None], np.eye(3)[None])}
+    assert match(ray, off_ray, {}) == {1: 0}  # 4 m off our ray: far less likely than the twin on it
+
+
 def test_the_resolution_clock_keeps_the_first_time_a_target_is_within_the_radius():
     clock = ResolutionClock(2.0)
     targets = [{"id": "a", "position": [0.0, 0.0, 0.0]}, {"id": "b", "position": [10.0, 0.0, 0.0]}]
