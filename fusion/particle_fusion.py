@@ -290,16 +290,21 @@ class ParticleChannelFilter:
         return belief.compressed(self.common_components, rng)
 
     def on_send(
-        self, local: ParticleSet, neighbours: Iterable[Hashable] | None = None, rng: np.random.Generator | None = None
+        self, local: ParticleSet, neighbours: Iterable[Hashable] | None = None, rng: np.random.Generator | None = None,
+        *, sent: GaussianMixture | None = None,
     ) -> None:
         """Record ``bel_ij ← bel_i`` (2.28) for the neighbours the set is sent to (default: every open
-        channel). ``rng`` is needed only when ``common_components`` compresses the stored belief."""
+        channel). ``sent``: the belief as it went on the wire when that is not the set itself (a compressed
+        mixture, what the neighbour will hold): recorded as it is. ``rng`` is needed only when
+        ``common_components`` compresses the stored belief."""
         if not isinstance(local, ParticleSet):
             raise ValueError(f"local belief must be a ParticleSet, got {type(local).__name__}")
+        if sent is not None and (not isinstance(sent, GaussianMixture) or sent.dim != local.dim):
+            raise ValueError(f"the sent belief must be a {local.dim}-D GaussianMixture, got {sent!r}")
         targets = list(self._common) if neighbours is None else list(neighbours)
         if not targets:
             return
-        belief = self._store(GaussianMixture.kde(local, self.bandwidth, self.shrink), rng)
+        belief = self._store(GaussianMixture.kde(local, self.bandwidth, self.shrink) if sent is None else sent, rng)
         for nb in targets:
             self._common[nb] = belief
 
@@ -311,21 +316,28 @@ class ParticleChannelFilter:
         rng: np.random.Generator,
         method: str | None = None,
         alpha_local: float | None = None,
+        received_belief: GaussianMixture | None = None,
+        resample: bool = True,
     ) -> ParticleSet:
         """Fuse ``received`` from ``neighbour`` into ``local`` (Alg. 5.2 or Alg. 5.3) and record
         ``bel_ij ← bel_j`` (2.27). The record is updated whatever the method, so that a later Bayesian
-        fusion divides by what the neighbour sent last."""
+        fusion divides by what the neighbour sent last. ``received_belief``: the neighbour's belief as a
+        density when it came as one (a compressed mixture, ``received`` then samples of it): used as
+        ``bel_j`` instead of the density estimate of ``received``. ``resample=False`` returns the weighted
+        pool of both sets (e.g. to regularise it from its weighted moments before resampling)."""
         method = self.method if method is None else _method(method)
         _check_sets(local, received)
         if method == "bayes":
             result = fuse_bayes_detailed(
-                local, received, self.common(neighbour), rng, bandwidth=self.bandwidth, shrink=self.shrink
+                local, received, self.common(neighbour), rng, bandwidth=self.bandwidth, shrink=self.shrink,
+                received_belief=received_belief, resample=resample,
             )
             fused, bel_j = result.fused, result.received_belief
         else:
             a = self.alpha_local if alpha_local is None else alpha_local
-            fused = fuse_lop(local, received, a, rng)
-            bel_j = GaussianMixture.kde(received, self.bandwidth, self.shrink)
+            fused = fuse_lop(local, received, a, rng, resample=resample)
+            bel_j = GaussianMixture.kde(received, self.bandwidth, self.shrink) if received_belief is None \
+                else received_belief
         self._common[neighbour] = self._store(bel_j, rng)
         return fused
 

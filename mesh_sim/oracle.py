@@ -61,7 +61,7 @@ class Oracle:
         taken (``now``: the world's simulation time; bearings stamped far after it are a clock fault and
         rejected)."""
         try:
-            bearings = [_bearing(b, env.stamp) for b in env.payload["bearings"]]
+            bearings = [parse_bearing(b, env.stamp) for b in env.payload["bearings"]]
         except (KeyError, TypeError, ValueError, AttributeError):
             self.rejected += 1
             return
@@ -93,7 +93,7 @@ class Oracle:
             self.imm_evaluator.record(t, truth, self.imm.estimates())
 
 
-def _bearing(entry: dict, stamp: float) -> Bearing:
+def parse_bearing(entry: dict, stamp: float) -> Bearing:
     """One bearing of a ``measurement`` message; ``ValueError`` unless its sensor position, azimuth/elevation
     and positive-definite covariance are finite arrays of shapes 3, 2 and 2x2."""
     sensor, azel = np.asarray(entry["sensor"], float), np.asarray(entry["azel"], float)

@@ -27,6 +27,7 @@ from mesh_sim.fire import FireWorld
 from mesh_sim.grid_oracle import GridOracle, grid_extent
 from mesh_sim.oracle import InFlightOracle, Oracle
 from mesh_sim.orbit_watch import OrbitWatch
+from mesh_sim.particle_oracle import ParticleOracle
 from mesh_sim.scenario import load
 from mesh_sim.target_set import truth_snapshot
 from perception.terrain import terrain_from_config
@@ -60,6 +61,8 @@ class World:
         terrain = terrain_from_config(sc.terrain)
         self.fire = None if scenario.fire is None else FireWorld(scenario.fire, terrain, sc.seed)
         self.grid_oracle = None if sc.grid is None else GridOracle(sc.grid, sc.area.as_tuple(), terrain)
+        self.particles = (ParticleOracle(sc.tracking.particle_init, sc.seed)
+                          if sc.tracking.initiation == "particles" else None)
 
     @staticmethod
     def subscriptions(keys: Keys) -> list[str]:
@@ -95,11 +98,15 @@ class World:
                 self.oracle.add(env, self.now)
                 if self.in_flight is not None:
                     self.in_flight.add(env, self.now)
+                if self.particles is not None and env.kind == "measurement":
+                    self.particles.add(env)
         self.oracle.evaluate(self.scenario.targets)
         if self.in_flight is not None:
             self.in_flight.evaluate(self.scenario.targets, self.now)
         if self.grid_oracle is not None:
             self.grid_oracle.evaluate(self.now)
+        if self.particles is not None:
+            self.particles.evaluate(self.scenario.targets, self.now)
 
     def _note_separation(self) -> None:
         """The closest two UAVs have come, and how many (sample, pair) were closer than the scenario's
@@ -144,6 +151,8 @@ class World:
             out["imm_targets"] = self.oracle.imm_evaluator.summary()
         if self.in_flight is not None:
             out["in_flight"] = self.in_flight.summary()
+        if self.particles is not None:
+            out["particles"] = self.particles.summary()
         if self.grid_oracle is not None:
             regions = [] if self.fire is None else self.fire.fire_regions(self.now)
             out["grid"] = {**self.grid_oracle.summary(regions, list(self.scenario.decoys)), "fire_regions": regions}

@@ -2,7 +2,9 @@
 
 ``EXCHANGES`` maps a wire kind to a builder that returns the exchange when the scenario asks for it
 (``None`` otherwise): tracks always, a grid with a ``[grid]`` section, the fleet's task assignment with
-``[tasking] planner = "assignment"``. Adding a belief kind is one module
+``[tasking] planner = "assignment"``, particle candidates with ``[tracking] initiation = "particles"`` (they
+live in the track exchange's tracker, which ``_tracks`` leaves in ``ExchangeContext.shared``: the track
+builder runs first). Adding a belief kind is one module
 in this folder plus one line here.
 
 A builder imports its exchange's module only when the scenario asks for it if that module is heavy: the grid
@@ -13,7 +15,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from agent.beliefs.flood import FloodExchange
 from agent.beliefs.tracks import TrackExchange
@@ -38,14 +40,18 @@ class ExchangeContext:
     views: object = None  # agent.plugins.Views: the other exchanges' views (filled once all are built)
     vehicle: object = None  # agent.vehicles.base.Vehicle: where this agent is
     incarnation: int = 0  # this life of the agent (agent.net.incarnation): a restarted agent numbers on from it
+    shared: dict = field(default_factory=dict)  # what one builder leaves for a later one ("tracker")
 
 
 def _tracks(ctx: ExchangeContext) -> TrackExchange:
     sc = ctx.scenario
     args = (ctx.me, sc.tracking, sc.step, ctx.terrain, ctx.seed, ctx.sender, ctx.outbox, ctx.unused)
     if sc.tracking.policy == "flood":
-        return FloodExchange(*args, topology=ctx.topology, incarnation=ctx.incarnation)
-    return TrackExchange(*args)
+        exchange = FloodExchange(*args, topology=ctx.topology, incarnation=ctx.incarnation)
+    else:
+        exchange = TrackExchange(*args)
+    ctx.shared["tracker"] = exchange.tracker
+    return exchange
 
 
 def _grid(ctx: ExchangeContext) -> BeliefExchange | None:
@@ -68,8 +74,18 @@ def _tasks(ctx: ExchangeContext) -> BeliefExchange | None:
                               ctx.vehicle.state().position, ctx.views, ctx.vehicle, ctx.seed)
 
 
+def _particles(ctx: ExchangeContext) -> BeliefExchange | None:
+    tracking = ctx.scenario.tracking
+    if tracking.initiation != "particles":
+        return None
+    from agent.beliefs.particles import ParticleExchange
+
+    return ParticleExchange(tracking.particle_init, ctx.shared["tracker"], ctx.seed + 15485863)
+
+
 EXCHANGES: dict[str, Callable[[ExchangeContext], BeliefExchange | None]] = {
     "track": _tracks,
     "grid": _grid,
     "tasks": _tasks,
+    "particles": _particles,
 }

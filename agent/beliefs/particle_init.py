@@ -15,7 +15,8 @@ Hand-over: once the set is one compact, Gaussian-like cloud (:meth:`fusion.parti
 and its position standard deviation is below ``handover_std``, its moment-matched Gaussian becomes the
 first position measurement of a trajectory track (Merino's suggestion of handing a converged particle
 belief to the information filter), which is then shared and fused like any other. A candidate that has
-not converged within ``candidate_lifetime`` seconds of its last update is dropped.
+not converged within ``candidate_lifetime`` seconds of its last update is dropped. With ``exchange = true``
+the candidates are also shared with the neighbours and fused with theirs (:mod:`agent.beliefs.particles`).
 """
 
 from __future__ import annotations
@@ -40,13 +41,20 @@ class ParticleInitConfig:
     gate: float = 9.0  # d² of the best particle for a bearing to update a candidate (Merino's (3.64) threshold)
     handover_std: float = 5.0  # m: largest position standard deviation handed over (chosen here)
     candidate_lifetime: float = 5.0  # s without an update before a candidate is dropped (chosen here)
+    exchange: bool = False  # share candidates with the neighbours (agent.beliefs.particles, Merino §5.2)
+    components: int = 6  # mixture components per shared candidate (chosen here: 480 bytes of numbers)
+    exchange_period: float = 1.0  # s between candidate messages (chosen here: the track sending period)
 
     def __post_init__(self):
         if isinstance(self.particles, bool) or not isinstance(self.particles, int) or self.particles < 50:
             raise ValueError(f"tracking.particles must be an integer >= 50, got {self.particles!r}")
         if not (0.0 < self.depth_min < self.depth_max and np.isfinite(self.depth_max)):
             raise ValueError(f"need 0 < depth_min < depth_max, got {self.depth_min}, {self.depth_max}")
-        for name in ("gate", "handover_std", "candidate_lifetime"):
+        if not isinstance(self.exchange, bool):
+            raise ValueError(f"tracking.particle_init.exchange must be true or false, got {self.exchange!r}")
+        if isinstance(self.components, bool) or not isinstance(self.components, int) or not 1 <= self.components <= 64:
+            raise ValueError(f"tracking.particle_init.components must be an integer in 1..64, got {self.components!r}")
+        for name in ("gate", "handover_std", "candidate_lifetime", "exchange_period"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"tracking.{name} must be positive, got {value!r}")
@@ -73,6 +81,7 @@ def back_projection(bearing: Bearing, n: int, depth_min: float, depth_max: float
 
 @dataclass
 class Candidate:
+    id: int  # local: peers match candidates by their beliefs, not by id (agent.beliefs.particle_match)
     particles: ParticleSet
     last_update: float
     hits: int
@@ -115,7 +124,8 @@ class ParticleInitiator:
             return
         if len(self.candidates) < MAX_CANDIDATES:
             c = self.config
-            self.candidates.append(Candidate(back_projection(bearing, c.particles, c.depth_min, c.depth_max, self.rng),
+            self.candidates.append(Candidate(self.started, back_projection(bearing, c.particles, c.depth_min,
+                                                                           c.depth_max, self.rng),
                                              bearing.t, 1, bearing.truth_id))
             self.started += 1
 
@@ -123,7 +133,7 @@ class ParticleInitiator:
         """Candidates that converged (removed and returned) — expired ones are dropped."""
         out, keep = [], []
         for candidate in self.candidates:
-            if self._converged(candidate.particles):
+            if self.converged(candidate.particles):
                 out.append(Handover(candidate.particles.to_gaussian(), candidate.hits, candidate.last_update,
                                     candidate.truth_id))
             elif t - candidate.last_update > self.config.candidate_lifetime:
@@ -134,7 +144,7 @@ class ParticleInitiator:
         self.handed_over += len(out)
         return out
 
-    def _converged(self, particles: ParticleSet) -> bool:
+    def converged(self, particles: ParticleSet) -> bool:
         if not particles.is_unimodal():
             return False
         return float(np.sqrt(np.max(np.linalg.eigvalsh(particles.cov())))) <= self.config.handover_std

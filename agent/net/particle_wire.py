@@ -12,6 +12,11 @@ the weight; here 6400 bytes of numbers plus ~20 bytes of payload keys and header
 is :meth:`fusion.mixture.GaussianMixture.from_particles` (k-means + moment matching: it keeps the
 set's mean and covariance exactly): ``8 K (1 + d + d(d+1)/2)`` bytes, 640 for K = 8 and d = 3.
 
+A *candidate message* (:mod:`agent.beliefs.particles`, kind ``KIND`` between agents) carries an agent's
+particle candidates, each compressed::
+
+    {"candidates": [{"id": local id >= 0, "b": compressed payload}, ...]}   at most MAX_SHARED entries, ids unique
+
 Decoding validates everything before it builds a belief and raises only :class:`agent.net.wire.DecodeError`:
 field set and types (``bad_field``/``bad_type``), sizes against the limits (``oversize``), byte counts
 against the declared shape (``bad_shape``), finite numbers (``non_finite``), non-negative weights that
@@ -43,6 +48,9 @@ __all__ = [
     "decode_particle_belief",
     "decode_particles",
     "decode_mixture",
+    "MAX_SHARED",
+    "encode_candidates",
+    "decode_candidates",
 ]
 
 #: Envelope kind of a particle belief (pass ``kinds=wire.KINDS | {KIND}`` to encode/decode).
@@ -52,6 +60,7 @@ KIND = "particles"
 MAX_DIM = 16
 MAX_PARTICLES = 1 << 15
 MAX_COMPONENTS = 1024
+MAX_SHARED = 64  # candidates in one message (chosen here: twice the initiator's MAX_CANDIDATES)
 _F8 = np.dtype("<f8")
 _SET_KEYS = frozenset({"f", "n", "d", "x", "w"})
 _GMM_KEYS = frozenset({"f", "k", "d", "a", "m", "c"})
@@ -124,6 +133,13 @@ def encode_for_budget(particles: ParticleSet, budget_bytes: int, rng: np.random.
             return payload
         k -= 1
     raise ValueError(f"a byte budget of {budget_bytes} does not hold even one {particles.dim}-D component")
+
+
+def encode_candidates(candidates: dict[int, GaussianMixture]) -> dict:
+    """A candidate message: every candidate's mixture under its local id."""
+    if len(candidates) > MAX_SHARED:
+        raise ValueError(f"{len(candidates)} candidates exceed the wire limit of {MAX_SHARED}")
+    return {"candidates": [{"id": int(cid), "b": encode_mixture(m)} for cid, m in candidates.items()]}
 
 
 # -- decoding -------------------------------------------------------------------------------------------
@@ -223,3 +239,25 @@ def _weights(w: np.ndarray) -> None:
     if not math.isclose(total, 1.0, rel_tol=0.0, abs_tol=WEIGHT_SUM_TOL):
         raise DecodeError("bad_field", f"weights sum to {total!r}, not 1")
 
+
+
+def decode_candidates(payload, dim: int) -> dict[int, GaussianMixture]:
+    """Validate a candidate message (``dim``-D mixtures, ids unique non-negative ints); only :class:`DecodeError`."""
+    if not isinstance(payload, dict) or set(payload) != {"candidates"}:
+        raise DecodeError("bad_field", "a candidate message is a map with one field, candidates")
+    entries = payload["candidates"]
+    if not isinstance(entries, list):
+        raise DecodeError("bad_type", f"candidates must be a list, got {type(entries).__name__}")
+    if len(entries) > MAX_SHARED:
+        raise DecodeError("oversize", f"{len(entries)} candidates (max {MAX_SHARED})")
+    out: dict[int, GaussianMixture] = {}
+    for entry in entries:
+        if not isinstance(entry, dict) or set(entry) != {"id", "b"}:
+            raise DecodeError("bad_field", "each candidate needs exactly an id and a belief b")
+        cid = entry["id"]
+        if not _is_int(cid) or cid < 0:
+            raise DecodeError("bad_field", f"candidate id must be a non-negative int, got {str(cid)[:40]!r}")
+        if cid in out:
+            raise DecodeError("bad_field", f"candidate id {cid} appears twice")
+        out[cid] = decode_mixture(entry["b"], dim)
+    return out

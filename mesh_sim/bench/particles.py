@@ -28,10 +28,15 @@ standard-deviation ratio ``(det Σ / det P)^{1/(2d)}`` (1 = right spread, > 1 co
 **Message bytes** per N: the full set (N x (3 + 1) doubles, :mod:`agent.net.particle_wire`) as payload and as a
 whole envelope, and the 8-component compressed form.
 
+**In the fleet** (:mod:`mesh_sim.bench.particles_fleet`): the ambiguous scenario in lockstep over seeds,
+with the particle exchange on and off — time to a unimodal, correct belief at every agent vs the centralized
+particle filter, and the bytes of particle messages vs track messages.
+
 Goals (chosen here): the N = 200 message within 6400-6700 bytes (thesis ≈ 6400); Bayes fusion faster than
 the thesis at 200 and 500; ``bayes-shrunk`` on the tree, at the largest N of the run, within 0.5 σ (RMS) of
 the centralized mean with a std ratio in [0.85, 1.15] (at small N the fused sets are degenerate and the
-Monte Carlo error dominates: reported, not a goal); LOP never less spread than Bayes.
+Monte Carlo error dominates: reported, not a goal); LOP never less spread than Bayes; the fleet's goals
+of :mod:`mesh_sim.bench.particles_fleet` (the issue's).
 """
 
 from __future__ import annotations
@@ -41,7 +46,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from mesh_sim.bench import common
+from mesh_sim.bench import common, particles_fleet
 
 NAME = "particles"
 SIZES = (200, 500, 2000)
@@ -191,15 +196,21 @@ def run(
     *,
     sizes: Sequence[int] | None = None,
     seeds: int | None = None,
+    fleet_seeds: int | None = None,
+    runs_dir=None,
 ) -> dict:
     """Run the benchmark; returns ``{"benchmark", "settings", "environment", "rows", "accuracy", "messages",
-    "goals"}``. ``sizes`` and ``seeds`` (keyword-only, for tests) shrink it further."""
+    "fleet", "goals"}``. ``sizes``, ``seeds`` and ``fleet_seeds`` (keyword-only, for tests; 0 fleet seeds
+    leaves the fleet out) shrink it further; ``runs_dir`` keeps the fleet's run folders."""
     settings = common.Settings.create(quick, repeats)
     sizes, seeds = _check((QUICK_SIZES if quick else SIZES) if sizes is None else sizes,
                           (QUICK_SEEDS if quick else SEEDS) if seeds is None else seeds)
+    fleet_seeds = (particles_fleet.QUICK_SEEDS if quick else particles_fleet.SEEDS) if fleet_seeds is None \
+        else fleet_seeds
     rng = np.random.default_rng(2007)
     rows, accuracy, messages = [], [], []
-    with common.progress(len(sizes) * (1 + len(METHODS)), NAME) as advance:
+    steps = len(sizes) * (1 + len(METHODS)) + fleet_seeds * len(particles_fleet.VARIANTS)
+    with common.progress(steps, NAME) as advance:
         for n in sizes:
             advance(f"timing N={n}")
             timings = common.time_calls(jobs(n, rng), settings)
@@ -220,16 +231,18 @@ def run(
                                  "std_ratio": float(ratio.mean()), "std_ratio_sd": float(ratio.std(ddof=1)),
                                  "distinct": float(np.mean([r["distinct"] for r in per_node]))})
             messages.append(message_sizes(n, rng))
+        fleet = particles_fleet.run(quick, fleet_seeds, runs_dir, advance) if fleet_seeds else []
     return {
         "benchmark": NAME,
         "settings": {"quick": settings.quick, "repeats": settings.repeats, "min_time_s": settings.min_time,
                      "sizes": list(sizes), "seeds": seeds, "dim": DIM, "compressed_k": COMPRESSED_K,
-                     "alpha_local": ALPHA_LOCAL},
+                     "alpha_local": ALPHA_LOCAL, "fleet_seeds": fleet_seeds},
         "environment": common.environment(),
         "rows": rows,
         "accuracy": accuracy,
         "messages": messages,
-        "goals": _goals(rows, accuracy, messages),
+        "fleet": fleet,
+        "goals": {**_goals(rows, accuracy, messages), **(particles_fleet.goals(fleet) if fleet else {})},
     }
 
 
@@ -316,5 +329,7 @@ def report(result: dict, console=None) -> None:
         "Payload: agent.net.particle_wire full set (raw little-endian doubles in a msgpack map); envelope: the whole "
         "agent.net.wire message; compressed: k-means + moment-matched mixture (mean and covariance kept).",
     )
+    if result.get("fleet"):
+        particles_fleet.report(result["fleet"], console)
     for goal in result["goals"].values():
         console.print(f"{common.verdict(goal['pass'])}  {goal['description']}", highlight=False)

@@ -52,12 +52,13 @@ def fire_scenario() -> AgentScenario:
 
 def test_every_registered_exchange_is_a_belief_exchange():
     built = {}
-    for sc in (fire_scenario(), AgentScenario.from_dict({"tasking": {"planner": "assignment"}})):
+    for sc in (fire_scenario(), AgentScenario.from_dict({"tasking": {"planner": "assignment"}}),
+               AgentScenario.from_dict({"tracking": {"initiation": "particles"}})):
         vehicle = vehicle_from_config(sc.vehicle, sc.start_position(0))
         ctx = ExchangeContext("uav0", sc, FlatTerrain(), 1, SendScheduler(sc.sending, None), None, Counter(),
                               Topology("uav0"), Views({}), vehicle)
         built.update((kind, ex) for kind, build in EXCHANGES.items() if (ex := build(ctx)) is not None)
-    assert set(built) == set(EXCHANGES) == {"track", "grid", "tasks"}
+    assert set(built) == set(EXCHANGES) == {"track", "grid", "tasks", "particles"}
     for kind, exchange in built.items():
         assert exchange.kind == kind
         assert_implements(exchange, plugins.BeliefExchange)
@@ -70,6 +71,7 @@ def test_an_exchange_the_scenario_does_not_ask_for_is_not_built():
     ctx = ExchangeContext("uav0", sc, FlatTerrain(), 1, SendScheduler(sc.sending, None), None, Counter(),
                           Topology("uav0"))
     assert EXCHANGES["grid"](ctx) is None
+    assert EXCHANGES["particles"](ctx) is None  # [tracking] initiation = "ray": no particle candidates
 
 
 @pytest.mark.parametrize("kind", sorted(SENSORS))

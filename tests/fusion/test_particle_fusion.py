@@ -258,3 +258,25 @@ def test_lop_is_more_conservative_than_bayes_fusion():
     assert np.linalg.det(bayes.cov()) == pytest.approx(np.linalg.det(P), rel=0.25)
     # LOP's spread is at least that of the narrower input along every axis: it never gains information
     assert np.all(np.diag(lop.cov()) > 0.9 * np.minimum(np.diag(a.cov()), np.diag(b.cov())))
+
+
+def test_on_send_records_the_belief_as_sent_and_rejects_one_of_another_dimension():
+    rng = np.random.default_rng(8)
+    local = ParticleSet.from_states(rng.normal(size=(300, 3)))
+    sent = GaussianMixture.from_particles(local, 2, rng)
+    cf = ParticleChannelFilter()
+    cf.on_send(local, ["j"], sent=sent)
+    assert cf.common("j") is sent
+    with pytest.raises(ValueError, match="3-D GaussianMixture"):
+        cf.on_send(local, ["j"], sent=GaussianMixture(np.ones(1), np.zeros((1, 2)), np.eye(2)[None]))
+
+
+def test_on_receive_takes_the_received_density_as_bel_j_and_can_return_the_weighted_pool():
+    rng = np.random.default_rng(9)
+    local = ParticleSet.from_states(rng.normal(size=(300, 3)))
+    density = GaussianMixture(np.ones(1), np.full((1, 3), 0.5), np.eye(3)[None])
+    received = density.sample(rng, 300)
+    for method in ("bayes", "lop"):
+        cf = ParticleChannelFilter(method=method)
+        pool = cf.on_receive("j", local, received, rng, received_belief=density, resample=False)
+        assert pool.n == 600 and cf.common("j") is density

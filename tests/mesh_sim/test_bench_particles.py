@@ -19,7 +19,7 @@ def _positive(value) -> bool:
 
 @pytest.fixture(scope="module")
 def result():
-    return particles.run(quick=True, repeats=1, sizes=(200,), seeds=2)
+    return particles.run(quick=True, repeats=1, sizes=(200,), seeds=2, fleet_seeds=0)
 
 
 def test_particles_is_registered():
@@ -30,6 +30,7 @@ def test_smallest_run_is_well_formed(result):
     assert result["benchmark"] == "particles"
     s = result["settings"]
     assert s["sizes"] == [200] and s["seeds"] == 2 and s["repeats"] == 1 and s["dim"] == 3
+    assert s["fleet_seeds"] == 0 and result["fleet"] == [] and "fleet_resolved" not in result["goals"]
     rows = result["rows"]
     assert [r["op"] for r in rows] == [key for key, _, _ in particles.OPS]
     for r in rows:

@@ -184,3 +184,58 @@ def test_decode_raises_only_decode_errors_whatever_a_field_holds(form, key, valu
         assert err.reason in wire.REASONS
     else:
         assert isinstance(out, ParticleSet | GaussianMixture)
+
+
+# -- candidate messages (agent.beliefs.particles) ----------------------------------------------------------
+def candidate_payload() -> dict:
+    rng = np.random.default_rng(5)
+    return pw.encode_candidates({3: GaussianMixture.from_particles(weighted_set(200, 3, 1), 6, rng),
+                                 11: GaussianMixture.from_particles(weighted_set(200, 3, 2), 2, rng)})
+
+
+def test_candidate_message_round_trip_through_the_envelope_is_exact():
+    payload = candidate_payload()
+    env = wire.decode(envelope_bytes(payload), kinds=KINDS, expected_origin="uav-2")
+    out = pw.decode_candidates(env.payload, 3)
+    assert sorted(out) == [3, 11] and out[3].k == 6 and out[11].k == 2
+    for entry in payload["candidates"]:
+        sent = pw.decode_mixture(entry["b"], 3)
+        np.testing.assert_array_equal(out[entry["id"]].means, sent.means)
+        np.testing.assert_array_equal(out[entry["id"]].covs, sent.covs)
+        np.testing.assert_array_equal(out[entry["id"]].weights, sent.weights)
+
+
+def test_a_candidate_of_six_components_costs_480_bytes_of_numbers():
+    payload = candidate_payload()
+    assert pw.mixture_bytes(6, 3) == 480
+    assert pw.payload_bytes(payload) < 480 + 160 + 2 * 60  # two candidates: numbers plus keys and headers
+
+
+def _with(payload: dict, **change) -> dict:
+    entries = [dict(e) for e in payload["candidates"]]
+    entries[0].update(change)
+    return {"candidates": entries}
+
+
+@pytest.mark.parametrize("mutate, reason", [
+    (lambda p: [], "bad_field"),  # not a map
+    (lambda p: {**p, "extra": 1}, "bad_field"),  # an unknown field
+    (lambda p: {"candidates": "x"}, "bad_type"),  # candidates not a list
+    (lambda p: {"candidates": p["candidates"] * 40}, "oversize"),  # more than MAX_SHARED
+    (lambda p: _with(p, id=-1), "bad_field"),  # negative id
+    (lambda p: _with(p, id=True), "bad_field"),  # a bool is no id
+    (lambda p: _with(p, id=11), "bad_field"),  # the same id twice
+    (lambda p: {"candidates": [{"id": 1}]}, "bad_field"),  # no belief
+    (lambda p: _with(p, b={**p["candidates"][0]["b"], "d": 2}), "bad_shape"),  # a 2-D belief for a 3-D state
+    (lambda p: _with(p, b={**p["candidates"][0]["b"], "m": b"\x00" * 7}), "bad_shape"),  # truncated means
+])
+def test_decode_candidates_rejects_bad_input_with_a_reason(mutate, reason):
+    with pytest.raises(DecodeError) as err:
+        pw.decode_candidates(mutate(candidate_payload()), 3)
+    assert err.value.reason == reason and err.value.reason in wire.REASONS
+
+
+def test_encode_candidates_refuses_more_than_the_wire_holds():
+    mixture = GaussianMixture(np.ones(1), np.zeros((1, 3)), np.eye(3)[None])
+    with pytest.raises(ValueError, match="exceed"):
+        pw.encode_candidates(dict.fromkeys(range(pw.MAX_SHARED + 1), mixture))
