@@ -36,6 +36,7 @@ from pathlib import Path
 
 from agent.agent import Agent
 from agent.config import AgentScenario, read_scenario_file
+from agent.net.fleet_key import read_key_file
 from agent.net.keys import Keys
 from agent.net.zenoh_transport import ZenohTransport, load_config
 from agent.runtime import (
@@ -105,7 +106,7 @@ def main(argv=None) -> int:
         scenario = AgentScenario.from_dict(read_scenario_file(args.scenario))
         if args.mavlink is not None:
             scenario = replace(scenario, vehicle=with_mavlink(scenario.vehicle, args.mavlink))
-        key = Path(args.fleet_key_file).read_bytes().strip() if args.fleet_key_file else None
+        key = read_key_file(args.fleet_key_file) if args.fleet_key_file else None
         keys = Keys(args.fleet)
         config = load_config(args.connect, args.zenoh_config)
         camera = _open_camera(args.camera) if args.camera is not None else None

@@ -40,6 +40,7 @@ import zenoh
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+from agent.net.fleet_key import new_key_file
 from agent.net.zenoh_transport import router_config
 from agent.runtime import write_json
 from mesh_sim import results
@@ -231,7 +232,9 @@ class Launcher:
 
     def _start_all(self, scenario_file: Path, endpoint: str) -> None:
         sc = self.scenario.agent
-        common = ["--fleet", self.fleet, "--connect", endpoint, "--parent-pid", str(os.getpid())]
+        key_file = new_key_file(self.run_dir)  # every process signs and checks with the run's own fleet key
+        common = ["--fleet", self.fleet, "--connect", endpoint, "--parent-pid", str(os.getpid()),
+                  "--fleet-key-file", str(key_file)]
 
         def timing(name: str) -> list[str]:
             return ["--epoch-file", str(self._epoch_file), "--ready-file", str(self._ready_file(name)),

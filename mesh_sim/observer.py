@@ -53,6 +53,7 @@ import rerun as rr
 import zenoh
 
 from agent.net import wire
+from agent.net.fleet_key import read_key_file
 from agent.net.keys import Incoming, Keys
 from agent.net.zenoh_transport import ZenohTransport, load_config
 from mesh_sim.observer_geometry import RAY_LENGTH, cov_to_ellipsoid, ray_end
@@ -325,6 +326,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of wall clock")
     p.add_argument("--recording-id", help="Rerun recording id (default: the fleet name)")
     p.add_argument("--application-id", default="skymesh", help="Rerun application id (default: skymesh)")
+    p.add_argument("--fleet-key-file", help="file holding the fleet's HMAC key: unsigned messages are rejected")
     p.add_argument("--parent-pid", type=int, help="exit when this process is no longer our parent (default: the "
                    "parent at start)")
     return p
@@ -339,7 +341,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         obs = run_observer(args.fleet, args.connect, args.zenoh_config, args.save, args.connect_viewer, args.spawn,
                            args.duration, recording_id=args.recording_id, application_id=args.application_id,
-                           parent_pid=args.parent_pid)
+                           parent_pid=args.parent_pid,
+                           fleet_key=read_key_file(args.fleet_key_file) if args.fleet_key_file else None)
     except ValueError as err:
         print(f"observer: {err}", file=sys.stderr)
         return 2

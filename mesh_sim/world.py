@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from agent.net import wire
+from agent.net.fleet_key import read_key_file
 from agent.net.keys import Keys
 from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
 from mesh_sim.fire import FireWorld
@@ -43,10 +44,11 @@ TRUTH_RATE_HZ = 10.0  # chosen here: agents extrapolate truth at constant veloci
 class World:
     """Truth publishing and the oracle, over any transport (Zenoh in a live run, the bus in lockstep)."""
 
-    def __init__(self, scenario, transport, keys: Keys):
+    def __init__(self, scenario, transport, keys: Keys, fleet_key: bytes | None = None):
         self.scenario = scenario
         self.transport = transport
         self.keys = keys
+        self.fleet_key = fleet_key  # signs the truth and checks the agents' messages (agent.net.fleet_key)
         self.oracle = Oracle(scenario.agent, imm=scenario.references.imm)
         self.in_flight = InFlightOracle(scenario.agent) if scenario.references.in_flight else None
         self.seq = 0
@@ -79,13 +81,13 @@ class World:
             payload["fire"] = self.fire.payload(t)
             payload["decoys"] = [list(d) for d in self.scenario.decoys]
         env = wire.Envelope(kind="truth", origin="world", seq=self.seq, stamp=t, payload=payload)
-        self.transport.publish(self.keys.sim("truth"), wire.encode(env))
+        self.transport.publish(self.keys.sim("truth"), wire.encode(env, self.fleet_key))
 
     def absorb_measurements(self) -> None:
         """Feed every agent's raw bearings to the oracle, then score it."""
         for item in self.transport.drain():
             try:
-                env = wire.decode(item.data, expected_origin=self.keys.parse(item.key)[-1])
+                env = wire.decode(item.data, expected_origin=self.keys.parse(item.key)[-1], key=self.fleet_key)
             except (wire.DecodeError, ValueError):
                 self.oracle.rejected += 1
                 continue
@@ -173,18 +175,20 @@ def main(argv=None) -> int:
     p.add_argument("--parent-pid", type=int, help="exit when this process (the launcher) is gone")
     p.add_argument("--epoch-file", help="wait for the launcher to write the start time here (instead of --epoch)")
     p.add_argument("--ready-file", help="created once this process is ready (with --epoch-file)")
+    p.add_argument("--fleet-key-file", help="file holding the fleet's HMAC key (agent.net.fleet_key)")
     args = p.parse_args(argv)
     from agent.net.zenoh_transport import ZenohTransport, load_config  # the live process only: lockstep needs no Zenoh
 
     try:
         scenario = load(args.scenario)
         config = load_config(args.connect, args.zenoh_config)
+        fleet_key = read_key_file(args.fleet_key_file) if args.fleet_key_file else None
     except ValueError as err:
         print(f"world: {err}", file=sys.stderr)
         return 2
     keys = Keys(args.fleet)
     transport = ZenohTransport("world", keys, config, World.subscriptions(keys), liveliness=False)
-    world = World(scenario, transport, keys)
+    world = World(scenario, transport, keys, fleet_key)
     stop = threading.Event()
     install_stop_handlers(stop)
     epoch = args.epoch if args.epoch is not None else time.time()
