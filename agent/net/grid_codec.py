@@ -71,10 +71,13 @@ grid               raw float32  keyframe   all prior   delta 1 %      delta 10 %
 1024x1024, L = 1   4 194 304    2 338 879  4 122       56 079 (2.4 %) 489 299 (21 %) 71
 =================  ===========  =========  ==========  =============  =============  ===========
 
-(percentages: of the keyframe). A keyframe of a 1024x1024 grid, or of a 512x512 Beta grid, exceeds the
-wire format's 1 MiB message limit (``agent.net.wire.MAX_MESSAGE_BYTES``). Time per message on 256x256
-(one core of the benchmark machine): keyframe ~ 10.8 ms to encode (zlib), 1.0 ms to decode; delta 1 %
-~ 0.1 ms to encode, 0.04 ms to decode; delta 10 % ~ 3 ms to encode (most of it the keyframe check).
+(percentages: of the keyframe). The 10 % change as a deadband ``step`` delta at q = 0.02 (the bench's
+step column; same generator, one draw per grid): 11 430 bytes on 256x256 (7.8 % of the keyframe, 20.7 %
+as float32 values), 177 162 on 1024x1024 (7.6 %, vs 21.0 %). A keyframe of a 1024x1024 grid, or of a
+512x512 Beta grid, exceeds the wire format's 1 MiB message limit (``agent.net.wire.MAX_MESSAGE_BYTES``).
+Time per message on 256x256 (one core of the benchmark machine): keyframe ~ 10.8 ms to encode (zlib),
+1.0 ms to decode; delta 1 % ~ 0.1 ms to encode, 0.04 ms to decode; delta 10 % ~ 3 ms to encode (most of it
+the keyframe check).
 
 **Decoding** validates everything before a cell is written and raises :class:`agent.net.wire.DecodeError`
 with ``reason`` in :data:`GRID_REASONS` (all of them in ``wire.REASONS``):
