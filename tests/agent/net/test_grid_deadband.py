@@ -10,9 +10,11 @@ import zlib
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agent.beliefs.grid_exchange import GridReceiver, GridSender
-from agent.net.grid_codec import MAX_TOLERANCE, decode_grid, encode_grid, quantize
+from agent.net.grid_codec import GRID_REASONS, MAX_TOLERANCE, decode_grid, encode_grid, quantize
 from agent.net.wire import DecodeError
 
 SHAPE = (12, 15)
@@ -165,3 +167,26 @@ def test_a_jump_too_large_for_32_bit_steps_travels_as_float32():
     payload = encode_grid(cur, base, 2, tolerance=0.01)
     assert payload["mode"] == "delta" and payload["n"] == 1
     np.testing.assert_array_equal(decode_grid(payload, SHAPE, 1, {2: base}.get), quantize(cur))
+
+
+def _valid_step() -> tuple[dict, np.ndarray]:
+    base = quantize(np.random.default_rng(12).normal(0.0, 5.0, (1, *SHAPE)))
+    cur = base.copy()
+    cur[0, 4, 2:7] += 3.0
+    payload = encode_grid(cur, base, 9, tolerance=0.05)
+    assert payload["mode"] == "step" and payload["n"] == 5
+    return payload, base
+
+
+@settings(max_examples=200, deadline=None)
+@given(field=st.sampled_from(["base", "L", "shape", "n", "dtype", "index", "values", "q", "vtype", "mode"]),
+       value=st.one_of(st.integers(-3, 300), st.floats(allow_nan=True), st.binary(max_size=40),
+                       st.sampled_from(["i1", "i2", "i4", "u1", "step", "delta"]), st.none()))
+def test_fuzzed_step_deltas_raise_only_decode_error(field, value):
+    good, base = _valid_step()
+    try:
+        out = decode_grid({**good, field: value}, SHAPE, 1, {9: base}.get)
+    except DecodeError as err:
+        assert err.reason in GRID_REASONS
+    else:
+        assert out.shape == (1, *SHAPE) and np.all(np.isfinite(out))
