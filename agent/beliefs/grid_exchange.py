@@ -16,7 +16,8 @@ the last messages they decoded from each origin, so they can rebuild the full gr
   deltas) and the newest one it decoded — the acknowledgement it gives back in its own grid messages.
 
 Losing a message loses no update: every message carries the sender's whole current state (as a delta
-against something the receiver provably holds), so the next one that arrives brings everything. A
+against something the receiver provably holds; with a deadband ``tolerance`` q, every cell within
+``q max(1, |b|)`` of it, :mod:`agent.net.grid_codec`), so the next one that arrives brings everything. A
 delta on a baseline the receiver does not hold is rejected (``grid_missing_baseline``) and costs one
 period, never a wrong grid.
 
