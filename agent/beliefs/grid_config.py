@@ -7,6 +7,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from agent.net.grid_codec import check_tolerance
 from agent.sensors.fire_camera_config import FireCameraConfig
 from fusion.channel_filter import Policy
 from fusion.grid_geometry import GridGeometry
@@ -25,6 +26,7 @@ class GridConfig:
     period: float = 2.0  # s between grid broadcasts (chosen here)
     delta: bool = True  # send deltas against acknowledged messages (False: a keyframe every time)
     keyframe_every: int = 10  # messages between forced keyframes (chosen here)
+    delta_tolerance: float = 0.0  # deadband q: a cell travels when |x - b| > q max(1, |b|) (0: every float32 change)
     alarm_threshold: float = 0.8  # cell probability above which cells form alarms (Merino's example value)
     alarm_period: float = 5.0  # s between alarm extractions, T of Merino §4.2.2 (chosen here)
     plan_spread: float = 0.0  # planning only: omega of (6.6) per planning step (0: plan on the map as it is)
@@ -49,6 +51,10 @@ class GridConfig:
             raise ValueError(f"grid.plan_spread must be a probability, got {self.plan_spread!r}")
         if isinstance(self.plan_steps, bool) or not isinstance(self.plan_steps, int) or self.plan_steps < 1:
             raise ValueError(f"grid.plan_steps must be a positive integer, got {self.plan_steps!r}")
+        check_tolerance(self.delta_tolerance, "grid.delta_tolerance")
+        if self.belief == "beta" and self.delta_tolerance > 0.0:  # measured: the exact filters fell back on a tree
+            raise ValueError("grid.delta_tolerance must be 0 for belief = 'beta': counts held within a deadband make "
+                             "the channel filters' subtraction (Merino (4.36)) negative where counts are small")
         if isinstance(self.keyframe_every, bool) or not isinstance(self.keyframe_every, int) or self.keyframe_every < 1:
             raise ValueError(f"grid.keyframe_every must be a positive integer, got {self.keyframe_every!r}")
 

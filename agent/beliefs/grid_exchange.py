@@ -16,7 +16,8 @@ the last messages they decoded from each origin, so they can rebuild the full gr
   deltas) and the newest one it decoded — the acknowledgement it gives back in its own grid messages.
 
 Losing a message loses no update: every message carries the sender's whole current state (as a delta
-against something the receiver provably holds), so the next one that arrives brings everything. A
+against something the receiver provably holds; with a deadband ``tolerance`` q, every cell within
+``q max(1, |b|)`` of it, :mod:`agent.net.grid_codec`), so the next one that arrives brings everything. A
 delta on a baseline the receiver does not hold is rejected (``grid_missing_baseline``) and costs one
 period, never a wrong grid.
 
@@ -35,7 +36,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from agent.net import wire
-from agent.net.grid_codec import GridHistory, decode_grid, encode_grid, quantize
+from agent.net.grid_codec import GridHistory, check_tolerance, decode_grid, encode_grid
 
 KEYFRAME_EVERY = 10  # messages between forced keyframes (chosen here: a late joiner waits at most this many)
 HISTORY = 16  # messages remembered per origin, on both sides (chosen here)
@@ -44,11 +45,13 @@ HISTORY = 16  # messages remembered per origin, on both sides (chosen here)
 class GridSender:
     """The sending side of one grid belief."""
 
-    def __init__(self, keyframe_every: int = KEYFRAME_EVERY, delta: bool = True, history: int = HISTORY):
+    def __init__(self, keyframe_every: int = KEYFRAME_EVERY, delta: bool = True, history: int = HISTORY,
+                 tolerance: float = 0.0):
         if keyframe_every < 1:
             raise ValueError(f"keyframe_every must be at least 1, got {keyframe_every}")
         self.keyframe_every = keyframe_every
         self.delta = delta
+        self.tolerance = check_tolerance(tolerance, "tolerance")
         self.sent = GridHistory(history)
         self.held: dict[str, set[int]] = {}  # neighbour -> our messages in self.sent it acknowledged decoding
         self._since_keyframe = keyframe_every  # the first message is a keyframe
@@ -70,11 +73,17 @@ class GridSender:
         return None if base is None else (base, self.sent.get(base))
 
     def encode(self, layers: np.ndarray, neighbours: Iterable[str]) -> tuple[dict, np.ndarray]:
-        """The codec payload of ``layers`` for the current neighbours, and the quantized layers the
-        receivers will reconstruct (what the caller must record as sent)."""
+        """The codec payload of ``layers`` for the current neighbours, and the layers the receivers will
+        reconstruct (what the caller must record as sent): decoded here from the payload and the baseline
+        by the receivers' own function, so the two sides agree bit for bit. Within the deadband
+        (``tolerance``) a cell keeps the baseline's value, so these differ from ``quantize(layers)``."""
         base = self.baseline(neighbours)
-        payload = encode_grid(layers, None if base is None else base[1], None if base is None else base[0])
-        return payload, quantize(layers)
+        if base is None:
+            payload = encode_grid(layers, None, None)
+        else:
+            payload = encode_grid(layers, base[1], base[0], self.tolerance)
+        held = decode_grid(payload, layers.shape[1:], layers.shape[0], {} if base is None else {base[0]: base[1]}.get)
+        return payload, held
 
     def sent_as(self, seq: int, quantized: np.ndarray, payload: dict) -> None:
         """Record that message ``seq`` left with ``payload`` (call only for messages actually sent)."""

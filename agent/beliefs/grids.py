@@ -63,7 +63,7 @@ class GridExchange:
         # the channel filters remember as many sent grids as the exchange does: a whole grid per message
         self.channels = ChannelFilter(self.beliefs.uniform(), config.policy, INTERSECT_RULES[config.intersect],
                                       history=HISTORY)
-        self.sender = GridSender(config.keyframe_every, config.delta)
+        self.sender = GridSender(config.keyframe_every, config.delta, tolerance=config.delta_tolerance)
         self.receiver = GridReceiver(self.geometry.shape, self.beliefs.layers)
         self.sensor = ThermalSensor(FireCamera(config.camera, config.detection, config.pose_noise, seed),
                                     self.geometry.centres_ned(), self.geometry.cell, terrain)

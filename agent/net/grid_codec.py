@@ -14,9 +14,24 @@ against a baseline the receiver *holds* keeps that property: the receiver applie
 and obtains the sender's full belief, never an increment that a lost message could make it miss.
 
 **Quantization.** Values travel as float32 (:data:`WIRE_DTYPE`, chosen here). :func:`quantize` is what a
-receiver reconstructs, ``float64(float32(x))``; the sender records ``quantize(local)`` as the belief it
-sent, so both sides agree bit-for-bit on every message (the channel filters subtract exactly what the
+receiver reconstructs, ``float64(float32(x))``; the sender records what the receivers rebuild as the belief
+it sent, so both sides agree bit-for-bit on every message (the channel filters subtract exactly what the
 receiver added). float32 keeps 24 bits of mantissa: a relative error below 2^-24 ~ 6e-8 per cell.
+
+**Deadband** (``tolerance = q > 0``; send-on-delta, Miskowicz 2006, "Send-on-delta concept: an event-based
+data reporting strategy", Sensors 6(1)). With exact deltas a grid fused by the Chernoff rule on loops
+changes in every cell where agents disagree, a little every period (the weighted log-odds converge
+geometrically), so nearly every cell's float32 bits change and the delta outgrows the keyframe (measured on
+the fire scenario under hybrid on a full mesh, 60 s: 27 of 31 messages were keyframes, 2 400 of 3 600 cells
+changed per period, 1 000 by more than 5 %). With a deadband a cell travels only when it left
+``|x - b| > s``, ``s = q max(1, |b|)`` (:func:`step_size`; ``b`` the value the receivers hold, an absolute
+quantum near 0 and a relative one beyond), and its new value travels as the whole number of quanta
+``k = round((x - b) / s)`` (:func:`apply_steps` rebuilds ``float32(b + k s)``, or 0 where rounding alone
+crossed zero, so counts stay non-negative): small integers, zlib'd. Every cell the receiver holds is then
+within ``s = q max(1, |b|)`` of the sender's value; a cell inside the deadband keeps the baseline's value
+and drifts no further, since the test is always against what the receiver holds. The payload carries
+``q``, so both sides compute ``s`` with the same IEEE operations and agree bit for bit. Keyframes stay
+exact float32.
 
 **Payloads** (short keys: bandwidth is a first-class metric)::
 
@@ -24,8 +39,13 @@ receiver added). float32 keeps 24 bits of mantissa: a relative error below 2^-24
                "values": zlib(float32 LE bytes of all layers, layer-major, C order)}
     delta:    {"mode": "delta", "base": base_seq, "L": L, "shape": [rows, cols], "n": k,
                "dtype": "u1" | "u2" | "u4", "index": zlib(gap bytes), "values": float32 LE bytes (L, k)}
+    step:     {"mode": "step", ...the delta's fields..., "q": q, "vtype": "i1" | "i2" | "i4",
+               "values": zlib(the steps k, LE, (L, k))}
 
-A delta lists the ``k`` cells whose float32 value differs *bitwise* from ``float32(baseline)`` in any
+A ``step`` delta is a deadband delta; one whose steps need more than 32 bits (a jump of more than 2^31
+quanta) or rebuild a value beyond float32's range is sent as a float32 ``delta`` instead.
+
+Without a deadband a delta lists the ``k`` cells whose float32 value differs *bitwise* from ``float32(baseline)`` in any
 layer (bitwise, so that even ``-0.0`` vs ``0.0`` is sent and the two sides agree bit-for-bit). Their
 flat indices ``i_1 < ... < i_k`` are gap-coded ``g_j = i_j - i_{j-1}`` with ``i_0 = -1`` (every
 ``g_j >= 1``), stored in the smallest unsigned dtype that holds the largest gap and zlib-compressed;
@@ -51,10 +71,13 @@ grid               raw float32  keyframe   all prior   delta 1 %      delta 10 %
 1024x1024, L = 1   4 194 304    2 338 879  4 122       56 079 (2.4 %) 489 299 (21 %) 71
 =================  ===========  =========  ==========  =============  =============  ===========
 
-(percentages: of the keyframe). A keyframe of a 1024x1024 grid, or of a 512x512 Beta grid, exceeds the
-wire format's 1 MiB message limit (``agent.net.wire.MAX_MESSAGE_BYTES``). Time per message on 256x256
-(one core of the benchmark machine): keyframe ~ 10.8 ms to encode (zlib), 1.0 ms to decode; delta 1 %
-~ 0.1 ms to encode, 0.04 ms to decode; delta 10 % ~ 3 ms to encode (most of it the keyframe check).
+(percentages: of the keyframe). The 10 % change as a deadband ``step`` delta at q = 0.02 (the bench's
+step column; same generator, one draw per grid): 11 430 bytes on 256x256 (7.8 % of the keyframe, 20.7 %
+as float32 values), 177 162 on 1024x1024 (7.6 %, vs 21.0 %). A keyframe of a 1024x1024 grid, or of a
+512x512 Beta grid, exceeds the wire format's 1 MiB message limit (``agent.net.wire.MAX_MESSAGE_BYTES``).
+Time per message on 256x256 (one core of the benchmark machine): keyframe ~ 10.8 ms to encode (zlib),
+1.0 ms to decode; delta 1 % ~ 0.1 ms to encode, 0.04 ms to decode; delta 10 % ~ 3 ms to encode (most of it
+the keyframe check).
 
 **Decoding** validates everything before a cell is written and raises :class:`agent.net.wire.DecodeError`
 with ``reason`` in :data:`GRID_REASONS` (all of them in ``wire.REASONS``):
@@ -63,7 +86,8 @@ with ``reason`` in :data:`GRID_REASONS` (all of them in ``wire.REASONS``):
 * ``grid_bad_shape``: ``L`` or ``shape`` not those the receiver expects for this grid;
 * ``grid_bad_index``: ``n`` not in ``[0, rows*cols]``, unknown index dtype, a zero gap (indices not
   increasing), an index beyond the grid;
-* ``grid_bad_values``: NaN or inf, or a number of values other than ``L * n``;
+* ``grid_bad_values``: NaN or inf, or a number of values other than ``L * n``; a step delta's ``q`` not a
+  float in ``(0, MAX_TOLERANCE]``, an unknown step dtype, or a rebuilt value beyond float32's range;
 * ``grid_missing_baseline``: the receiver does not hold message ``base`` (it waits for a keyframe or a
   delta on a baseline it has);
 * ``grid_corrupt``: a field that should be bytes is not, a zlib error, a decompressed or raw byte count
@@ -92,14 +116,19 @@ ZLIB_LEVEL = 6  # zlib's default level, for index gaps and keyframes (chosen her
 KEYFRAME_PROBE_FRACTION = 1 / 16  # deltas up to this fraction of the raw keyframe skip the keyframe check (chosen here)
 PROBE_CHUNK = 1 << 16  # bytes fed to zlib between checks of the keyframe's size so far (chosen here)
 INDEX_DTYPES: dict[str, np.dtype] = {"u1": np.dtype("u1"), "u2": np.dtype("<u2"), "u4": np.dtype("<u4")}
+STEP_DTYPES: dict[str, np.dtype] = {"i1": np.dtype("i1"), "i2": np.dtype("<i2"), "i4": np.dtype("<i4")}
+INT32_MAX = (1 << 31) - 1
 MAX_CELLS = (1 << 32) - 1  # cells per layer: every gap must fit in uint32
 SEQ_LIMIT = 1 << 64  # sequence numbers live in [0, 2**64), as in agent.net.wire
+MAX_TOLERANCE = 0.5  # the widest deadband accepted: a cell may lag by half its magnitude (chosen here)
 
 GRID_REASONS: frozenset[str] = frozenset(
     {"grid_bad_mode", "grid_bad_shape", "grid_bad_index", "grid_bad_values", "grid_missing_baseline", "grid_corrupt"}
 )
 _KEY_FIELDS = frozenset({"mode", "L", "shape", "values"})
 _DELTA_FIELDS = frozenset({"mode", "base", "L", "shape", "n", "dtype", "index", "values"})
+_STEP_FIELDS = _DELTA_FIELDS | {"q", "vtype"}
+_FIELDS = {"key": _KEY_FIELDS, "delta": _DELTA_FIELDS, "step": _STEP_FIELDS}
 
 
 # -- quantization ------------------------------------------------------------------------------------
@@ -115,13 +144,16 @@ def quantize(values: np.ndarray) -> np.ndarray:
 
 
 # -- encode ------------------------------------------------------------------------------------------
-def encode_grid(layers: np.ndarray, baseline: np.ndarray | None, base_seq: int | None) -> dict:
+def encode_grid(layers: np.ndarray, baseline: np.ndarray | None, base_seq: int | None,
+                tolerance: float = 0.0) -> dict:
     """A keyframe (``baseline is None``) or a delta against ``baseline``, the quantized layers of message
-    ``base_seq`` that the receivers hold (see the module docstring for the format and the fallback).
+    ``base_seq`` that the receivers hold (see the module docstring for the format, the deadband of
+    ``tolerance`` and the fallback).
 
     ``layers``: ``(L, rows, cols)`` real array, finite and within float32's range. Raises ``ValueError``
-    for bad shapes, non-finite values, a baseline of another shape, or a ``base_seq`` missing / given
-    without a baseline."""
+    for bad shapes, non-finite values, a baseline of another shape, a ``base_seq`` missing / given
+    without a baseline, or a ``tolerance`` outside ``[0, MAX_TOLERANCE]``."""
+    check_tolerance(tolerance, "tolerance")
     cur = _checked_layers(layers, "layers")
     if baseline is None:
         if base_seq is not None:
@@ -135,36 +167,13 @@ def encode_grid(layers: np.ndarray, baseline: np.ndarray | None, base_seq: int |
     L, rows, cols = cur.shape
     cur_flat = cur.reshape(L, rows * cols)
     base_flat = np.ascontiguousarray(base, dtype=np.float64).reshape(L, rows * cols)
-    # Candidates: float64 bits differ (equal float64 bits give equal float32 bits). Then the float32 bits
-    # of the candidates only: two full float32 conversions avoided, the result is the same.
-    cur_bits, base_bits = cur_flat.view(np.uint64), base_flat.view(np.uint64)
-    candidate = cur_bits[0] != base_bits[0]
-    for layer in range(1, L):
-        candidate |= cur_bits[layer] != base_bits[layer]
-    idx = np.flatnonzero(candidate)
-    values = cur_flat[:, idx].astype(_WIRE)
-    with np.errstate(over="ignore", invalid="ignore"):
-        old = base_flat[:, idx].astype(_WIRE)
-    new_bits, old_bits = values.view(_BITS), old.view(_BITS)
-    changed = new_bits[0] != old_bits[0]
-    for layer in range(1, L):
-        changed |= new_bits[layer] != old_bits[layer]
-    if not changed.all():
-        idx, values = idx[changed], values[:, changed]
-    gaps = idx.copy()  # i_j - i_{j-1} with i_0 = -1
-    gaps[1:] -= idx[:-1]
-    gaps[:1] += 1
-    name = _index_dtype(int(gaps.max()) if gaps.size else 0)
-    delta = {
-        "mode": "delta",
-        "base": int(base_seq),
-        "L": L,
-        "shape": [rows, cols],
-        "n": int(idx.size),
-        "dtype": name,
-        "index": zlib.compress(gaps.astype(INDEX_DTYPES[name]).tobytes(), ZLIB_LEVEL),
-        "values": values.tobytes(),
-    }
+    idx = _bit_changes(cur_flat, base_flat) if tolerance == 0.0 else _moved(cur_flat, base_flat, tolerance)
+    delta = {"mode": "delta", "base": int(base_seq), "L": L, "shape": [rows, cols], **_index(idx)}
+    steps = _steps(cur_flat[:, idx], base_flat[:, idx], tolerance) if tolerance > 0.0 else None
+    if steps is None:
+        delta["values"] = cur_flat[:, idx].astype(_WIRE).tobytes()
+    else:
+        delta.update(mode="step", q=float(tolerance), vtype=_int_dtype(steps), values=_packed_steps(steps))
     delta_size = encoded_size(delta)
     if delta_size <= KEYFRAME_PROBE_FRACTION * 4 * cur.size:
         return delta
@@ -173,6 +182,80 @@ def encode_grid(layers: np.ndarray, baseline: np.ndarray | None, base_seq: int |
         return delta
     key = _keyframe(cur.shape, compressed)
     return key if encoded_size(key) < delta_size else delta
+
+
+def check_tolerance(tolerance, name: str) -> float:
+    """``tolerance`` as a float in ``[0, MAX_TOLERANCE]``, or a ``ValueError`` naming ``name``."""
+    if isinstance(tolerance, bool) or not isinstance(tolerance, int | float | np.floating | np.integer) \
+            or not 0.0 <= tolerance <= MAX_TOLERANCE:
+        raise ValueError(f"{name} must be a number in [0, {MAX_TOLERANCE}], got {tolerance!r}")
+    return float(tolerance)
+
+
+def _bit_changes(cur: np.ndarray, base: np.ndarray) -> np.ndarray:
+    """Flat indices of the cells whose float32 bits differ in any layer (``cur``, ``base``: ``(L, cells)``
+    float64). Candidates first: float64 bits differ (equal float64 bits give equal float32 bits); then the
+    float32 bits of the candidates only, which avoids two full float32 conversions."""
+    cur_bits, base_bits = cur.view(np.uint64), base.view(np.uint64)
+    candidate = cur_bits[0] != base_bits[0]
+    for layer in range(1, cur.shape[0]):
+        candidate |= cur_bits[layer] != base_bits[layer]
+    idx = np.flatnonzero(candidate)
+    with np.errstate(over="ignore", invalid="ignore"):
+        new_bits, old_bits = cur[:, idx].astype(_WIRE).view(_BITS), base[:, idx].astype(_WIRE).view(_BITS)
+    return idx[np.any(new_bits != old_bits, axis=0)]
+
+
+def _moved(cur: np.ndarray, base: np.ndarray, tolerance: float) -> np.ndarray:
+    """Flat indices of the cells that left the deadband in any layer: ``|x - b| > q max(1, |b|)``
+    (send-on-delta, Miskowicz 2006, with the absolute/relative threshold of the module docstring)."""
+    return np.flatnonzero(np.any(np.abs(cur - base) > tolerance * np.maximum(1.0, np.abs(base)), axis=0))
+
+
+def _index(idx: np.ndarray) -> dict:
+    """The ``n``, ``dtype`` and ``index`` fields of sorted flat cell indices ``idx`` (gap-coded, zlib)."""
+    gaps = idx.copy()  # i_j - i_{j-1} with i_0 = -1
+    gaps[1:] -= idx[:-1]
+    gaps[:1] += 1
+    name = _index_dtype(int(gaps.max()) if gaps.size else 0)
+    return {"n": int(idx.size), "dtype": name,
+            "index": zlib.compress(gaps.astype(INDEX_DTYPES[name]).tobytes(), ZLIB_LEVEL)}
+
+
+def step_size(base: np.ndarray, q: float) -> np.ndarray:
+    """The quantum of a cell, ``s = q max(1, |b|)`` (the deadband's width and the step of its values)."""
+    return q * np.maximum(1.0, np.abs(base))
+
+
+def apply_steps(base: np.ndarray, steps: np.ndarray, q: float) -> np.ndarray:
+    """What a ``step`` delta rebuilds: ``r = b + k s``, except that a value landing on the other side of zero
+    from ``b`` by at most ``s / 2`` becomes 0 (so values that cannot be negative, Beta counts, never are);
+    then ``float32`` of it, as float64. The same IEEE operations on both sides: sender and receiver agree
+    bit for bit. Non-finite where it overflows float32."""
+    step = step_size(base, q)
+    with np.errstate(over="ignore", invalid="ignore"):
+        rebuilt = base + steps * step
+        rebuilt = np.where((rebuilt * base < 0.0) & (np.abs(rebuilt) <= 0.5 * step), 0.0, rebuilt)
+        return rebuilt.astype(_WIRE).astype(np.float64)
+
+
+def _steps(cur: np.ndarray, base: np.ndarray, q: float) -> np.ndarray | None:
+    """``k = round((x - b) / s)`` per sent cell and layer, or ``None`` when a ``k`` needs more than 32 bits or
+    a rebuilt value overflows float32 (the delta then carries float32 values)."""
+    steps = np.rint((cur - base) / step_size(base, q))
+    if steps.size and (np.abs(steps).max() > INT32_MAX or not np.all(np.isfinite(apply_steps(base, steps, q)))):
+        return None
+    return steps.astype(np.int64)
+
+
+def _int_dtype(steps: np.ndarray) -> str:
+    """The smallest of i1, i2, i4 that holds every step."""
+    top = int(np.abs(steps).max()) if steps.size else 0
+    return "i1" if top <= 0x7F else "i2" if top <= 0x7FFF else "i4"
+
+
+def _packed_steps(steps: np.ndarray) -> bytes:
+    return zlib.compress(steps.astype(STEP_DTYPES[_int_dtype(steps)]).tobytes(), ZLIB_LEVEL)
 
 
 def encoded_size(payload: dict) -> int:
@@ -242,9 +325,9 @@ def decode_grid(
     if not isinstance(payload, dict):
         raise DecodeError("grid_bad_mode", f"payload must be a map, got {type(payload).__name__}")
     mode = payload.get("mode")
-    fields = {"key": _KEY_FIELDS, "delta": _DELTA_FIELDS}.get(mode) if isinstance(mode, str) else None
+    fields = _FIELDS.get(mode) if isinstance(mode, str) else None
     if fields is None:
-        raise DecodeError("grid_bad_mode", f"mode {str(mode)[:40]!r} is neither 'key' nor 'delta'")
+        raise DecodeError("grid_bad_mode", f"mode {str(mode)[:40]!r} is not 'key', 'delta' or 'step'")
     if set(payload) != fields:
         found = sorted(str(k)[:40] for k in payload)
         raise DecodeError("grid_bad_mode", f"{mode} payload fields {found}, expected {sorted(fields)}")
@@ -274,11 +357,13 @@ def decode_grid(
     idx = np.cumsum(gaps, dtype=np.uint64)  # n < 2**32 gaps < 2**32 each: no wrap-around
     if n and int(idx[-1]) > size:
         raise DecodeError("grid_bad_index", f"cell index {int(idx[-1]) - 1} outside a grid of {size} cells")
-    raw = payload["values"]
-    if not isinstance(raw, bytes | bytearray) or len(raw) % 4:
-        raise DecodeError("grid_corrupt", "delta values must be float32 bytes")
-    values = _values(raw, layers * n)
-
+    if mode == "delta":
+        raw = payload["values"]
+        if not isinstance(raw, bytes | bytearray) or len(raw) % 4:
+            raise DecodeError("grid_corrupt", "delta values must be float32 bytes")
+        values = _values(raw, layers * n).reshape(layers, n)
+    else:
+        q, steps = _step_values(payload, layers * n)
     stored = baseline_lookup(base)
     if stored is None:
         raise DecodeError("grid_missing_baseline", f"baseline message {base} is not held")
@@ -286,8 +371,24 @@ def decode_grid(
     if stored.shape != (layers, rows, cols):
         raise ValueError(f"baseline {base} has shape {stored.shape}, expected {(layers, rows, cols)}")
     out = np.array(stored, dtype=np.float64, copy=True)
-    out.reshape(layers, size)[:, idx.astype(np.intp) - 1] = values.reshape(layers, n)
+    cells = idx.astype(np.intp) - 1
+    if mode == "step":
+        values = apply_steps(out.reshape(layers, size)[:, cells], steps.reshape(layers, n), q)
+        if not np.all(np.isfinite(values)):
+            raise DecodeError("grid_bad_values", "a rebuilt value overflows float32")
+    out.reshape(layers, size)[:, cells] = values
     return out
+
+
+def _step_values(payload: dict, count: int) -> tuple[float, np.ndarray]:
+    """The quantum ``q`` and the ``count`` integer steps of a ``step`` delta (before its baseline is used)."""
+    q, vtype = payload["q"], payload["vtype"]
+    if not isinstance(q, float) or not 0.0 < q <= MAX_TOLERANCE:  # NaN fails the comparison
+        raise DecodeError("grid_bad_values", f"quantum q={str(q)[:40]} is not a float in (0, {MAX_TOLERANCE}]")
+    if not isinstance(vtype, str) or vtype not in STEP_DTYPES:
+        raise DecodeError("grid_bad_values", f"step dtype {str(vtype)[:40]!r} not in {sorted(STEP_DTYPES)}")
+    raw = _inflate(payload["values"], count * STEP_DTYPES[vtype].itemsize, "values")
+    return q, np.frombuffer(raw, dtype=STEP_DTYPES[vtype]).astype(np.float64)
 
 
 def _check_geometry(shape, layers) -> tuple[int, int]:

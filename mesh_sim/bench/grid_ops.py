@@ -21,7 +21,8 @@ ratio to its bound. Each operation's result is checked against its bound's befor
 Grids (chosen here): a half-explored log-odds grid — a random half of the cells hold N(0, 2^2) evidence,
 the rest the prior 0 — and a Beta grid with Exp(2) counts in the same cells; a "change" adds N(0, 1) to
 a random fraction of the cells. The codec works on ``L = 1`` (log-odds); message sizes are reported for
-``L = 1`` and ``L = 2`` (Beta counts).
+``L = 1`` and ``L = 2`` (Beta counts), and for the 10 % change on ``L = 1`` also as a deadband ``step`` delta
+at the fire scenario's ``delta_tolerance`` (:data:`STEP_TOLERANCE`).
 
 Goals (chosen here): every operation within :data:`SPEED_GOAL` x of its bound, except the 10 % delta
 encode (reported, not a goal: it also checks whether a keyframe would be smaller — see
@@ -52,6 +53,8 @@ EXPLORED_FRACTION = 0.5  # cells holding evidence in the benchmark grids (chosen
 EVIDENCE_STD = 2.0  # log-odds evidence of an explored cell ~ N(0, 2^2) (chosen here)
 BETA_COUNT_MEAN = 2.0  # Beta counts of an explored cell ~ Exp(2) (chosen here)
 CHANGES = {"1": 0.01, "10": 0.10}  # fractions of cells changed between baseline and message
+STEP_TOLERANCE = 0.02  # the deadband of the step delta's size row: the fire scenario's grid.delta_tolerance
+STEP_KIND = "step delta 10 %"
 CELL_M = 5.0  # geometry cell size [m]; irrelevant to the timings (chosen here)
 SEED = 20240611
 
@@ -199,7 +202,10 @@ def _message_sizes(n: int, layers: int, rng: np.random.Generator) -> list[dict]:
     rows.append(row("keyframe", key))
     rows.append(row("keyframe, all prior", codec.encode_grid(np.zeros_like(base), None, None)))
     for tag, fraction in CHANGES.items():
-        rows.append(row(f"delta {tag} %", codec.encode_grid(_changed(rng, base, fraction), base, 1)))
+        changed = _changed(rng, base, fraction)
+        rows.append(row(f"delta {tag} %", codec.encode_grid(changed, base, 1)))
+        if tag == "10" and layers == 1:  # Beta grids keep exact deltas (agent.beliefs.grid_config)
+            rows.append(row(STEP_KIND, codec.encode_grid(changed, base, 1, tolerance=STEP_TOLERANCE)))
     rows.append(row("delta, no change", codec.encode_grid(base, base, 1)))
     return rows
 
@@ -306,7 +312,7 @@ def report(result: dict, console=None) -> None:
         if m is None:
             return "—"
         text = _bytes(m["bytes"]) + (f" ({m['ratio_to_keyframe']:.1%})" if ratio else "")
-        text += "" if m["mode"] == "delta" or m["kind"].startswith("keyframe") else " key"
+        text += "" if m["mode"] in ("delta", "step") or m["kind"].startswith("keyframe") else " key"
         return text + ("" if m["fits_wire"] else " [yellow]>1 MiB[/yellow]")
 
     msg_rows = []
@@ -314,14 +320,16 @@ def report(result: dict, console=None) -> None:
         msg_rows.append([
             size, f"{layers} ({'log-odds' if layers == 1 else 'Beta'})", _bytes(kinds["keyframe"]["raw_bytes"]),
             cell(kinds.get("keyframe"), False), cell(kinds.get("keyframe, all prior"), False),
-            cell(kinds.get("delta 1 %")), cell(kinds.get("delta 10 %")), cell(kinds.get("delta, no change"), False),
+            cell(kinds.get("delta 1 %")), cell(kinds.get("delta 10 %")), cell(kinds.get(STEP_KIND)),
+            cell(kinds.get("delta, no change"), False),
         ])
     common.print_table(
         console, "Bytes per grid message (msgpack payload; in brackets: ÷ keyframe)",
         ["grid", ("layers", "left"), "raw float32", "keyframe", "keyframe, all prior", "delta 1 %", "delta 10 %",
-         "empty delta"],
+         f"step 10 %, q = {STEP_TOLERANCE:g}", "empty delta"],
         msg_rows,
-        "'key' = the codec sent a keyframe because it was smaller than the delta. '>1 MiB' = larger than the wire "
+        "'key' = the codec sent a keyframe because it was smaller than the delta. 'step': the same change as a "
+        "deadband delta (whole quanta, agent.net.grid_codec). '>1 MiB' = larger than the wire "
         f"format's message limit ({wire.MAX_MESSAGE_BYTES:,} bytes).",
     )
     for goal in result["goals"]:

@@ -50,7 +50,8 @@ def test_rows_cover_every_operation_and_size_and_agree_with_their_bounds(result)
 
 def test_message_sizes_follow_the_codec(result):
     by = {(m["n"], m["layers"], m["kind"]): m for m in result["messages"]}
-    assert set(by) == {(n, L, k) for n in bench.QUICK_SIZES for L in (1, 2) for k in KINDS}
+    assert set(by) == {(n, L, k) for n in bench.QUICK_SIZES for L in (1, 2) for k in KINDS} | {
+        (n, 1, bench.STEP_KIND) for n in bench.QUICK_SIZES}
     for (n, L, kind), m in by.items():
         assert m["raw_bytes"] == 4 * L * n * n and _positive(m["bytes"])
         assert m["fits_wire"] is (m["bytes"] <= 1 << 20)
@@ -61,6 +62,8 @@ def test_message_sizes_follow_the_codec(result):
             assert m["bytes"] < 0.01 * m["raw_bytes"]
         elif kind == "delta, no change":
             assert m["mode"] == "delta" and m["bytes"] < 100
+        elif kind == bench.STEP_KIND:  # whole quanta of q max(1, |b|) in 1-2 bytes, zlib'd, vs float32 values
+            assert m["mode"] == "step" and m["bytes"] < 0.75 * by[(n, L, "delta 10 %")]["bytes"]
         else:
             assert m["mode"] == "delta"
     for n in bench.QUICK_SIZES:
