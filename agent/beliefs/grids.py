@@ -172,6 +172,7 @@ class GridExchange:
             self.sender.acknowledge(origin, ours)
         out = self.channels.on_receive(origin, self.grid, received, ours, seq, edge)
         self.grid = out.fused
+        self._advance(t)  # a peer's clock ahead of ours moved the grid on: what we send is read at its tick
         self.fusions[out.method] += 1
         return [(f"grid_{out.method}", out.cause)]
 

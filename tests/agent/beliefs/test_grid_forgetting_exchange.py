@@ -91,3 +91,20 @@ def test_on_a_loop_hybrid_forgetting_maps_are_conservative_and_naive_ones_are_no
 def test_bad_half_lives_are_clear_errors(bad):
     with pytest.raises(ValueError, match="grid.half_life"):
         GridConfig.from_dict(bad)
+
+
+def test_a_grid_from_a_peer_whose_clock_is_ahead_moves_ours_on_and_what_we_send_is_read_at_that_tick():
+    config = GridConfig(cell=10.0, half_life=6.0)
+    oracle = GridOracle(config, AREA, FlatTerrain())
+    ahead, behind = (GridExchange(n, config, AREA, FlatTerrain(), 1, Simulator(oracle, n)) for n in ("a", "b"))
+    nothing = types.SimpleNamespace(index=np.zeros(0, int), llr=np.zeros(0), m=np.zeros(0), n=np.zeros(0))
+    ahead.absorb(9.0, {"fire_evidence": types.SimpleNamespace(index=np.array([3]), llr=np.array([2.0]),
+                                                               m=np.array([2.0]), n=np.array([0.0]))})
+    message = ahead.outgoing(9.0, ["b"])
+    ahead.sent(1, message)
+    behind.absorb(5.0, {"fire_evidence": nothing})
+    behind.receive("a", 1, 9.0, message.payload, True, 5.0)
+    assert behind.grid.epoch == behind.beliefs.epoch == 9
+    assert behind.beliefs.from_layers(behind.beliefs.to_layers(behind.grid)).epoch == 9
+    behind.absorb(6.0, {"fire_evidence": nothing})  # its own clock catches up: nothing goes back
+    assert behind.grid.epoch == 9 and behind.grid.evidence.ravel()[3] == pytest.approx(2.0, abs=1e-6)
