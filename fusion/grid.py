@@ -23,25 +23,43 @@ filter reproduces centralized fusion to rounding error. Default ``clamp = 0.999`
 with weighted counts is exactly the weighted exponential product of two Betas (an exponential family
 with natural parameters ``alpha - 1, beta - 1``).
 
+*The fire probability of a Beta cell.* The Beta is a belief over ``X``, the rate at which looks at the
+cell see fire (Merino §4.4): near ``P_D`` on a fire, near ``P_F`` off it — with the camera's pixel blur, a
+burning cell's looks are only 0.8-0.9 fire (measured: ``tests/agent/beliefs/test_grid_beta_alarms.py``).
+The mean (4.28) estimates ``X``, not whether the cell burns; thresholding it at Merino's 0.8 asks for 80 %
+fire looks and misses a burning cell whose looks are 0.75 fire, or one that was seen unburnt before it
+ignited. Given a ``boundary`` ``x*``, ``probability`` is instead ``P(X > x* | alpha, beta) = 1 -
+I_{x*}(alpha, beta)`` (the regularised incomplete Beta function): the posterior mass on the fire side of
+``x*`` (without one, the mean). :func:`detection_boundary` gives the ``x*`` at which one look of a
+detector ``(P_D, P_F)`` is equally likely under both hypotheses (chosen here).
+
 The intersection rules for loops are in :mod:`fusion.grid_intersect`, the geometry in
 :mod:`fusion.grid_geometry`.
 
 Every rule is a per-cell convex combination (or the max) of the inputs, so where all evidence of a cell
-has one sign no node can become more confident than the centralized grid. Grids are immutable, and
-static: ``epoch`` is ``None`` and ``advanced_to`` returns the grid itself.
+has one sign no node can become more confident than the centralized grid. Grids are immutable. Without
+``forgetting`` they are static: ``epoch`` is ``None`` and ``advanced_to`` returns the grid itself. With a
+:class:`~fusion.grid_forgetting.Forgetting` a grid lives at a tick (``epoch``) of a common clock and
+``advanced_to`` multiplies its evidence by the forgetting factor — linear, so fusion stays exact; grids are
+combined only at one tick (the channel filter advances both first), and ``kl_divergence`` advances the
+older one itself.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import betaln, digamma, expit, log_expit, logit
+from scipy.special import betaincc, betaln, digamma, expit, log_expit, logit
 
+from fusion.grid_forgetting import Forgetting
 from fusion.grid_geometry import GridGeometry, GridGeometryError, real_number
 
 #: Default read-time probability clamp: cells read within [1 - clamp, clamp] (chosen here).
 DEFAULT_CLAMP = 0.999
-#: Tolerance below zero that Beta ``remove`` rounds to zero rather than rejecting (chosen here).
+#: Tolerance below zero that Beta ``remove`` rounds to zero rather than rejecting (chosen here) ...
 REMOVE_TOLERANCE = 1e-9
+#: ... plus this fraction of the count removed: counts travel as float32 (relative rounding 6e-8 per
+#: message), and with forgetting every message re-rounds every count (chosen here: a few roundings' worth).
+REMOVE_RELATIVE = 1e-6
 
 
 # -- shared checks -----------------------------------------------------------------------------------
@@ -117,6 +135,25 @@ def _unit(value, name: str) -> float:
     return value
 
 
+def _open_unit(value, name: str) -> float:
+    value = real_number(value, name)
+    if not 0.0 < value < 1.0:
+        raise ValueError(f"{name} must lie in (0, 1), got {value}")
+    return value
+
+
+def detection_boundary(pd: float, pf: float) -> float:
+    """The look rate ``x*`` at which a detector ``(P_D, P_F)`` is no evidence either way: one look with
+    detection probability ``x*`` has expected log-likelihood ratio zero (Alg. 4.2),
+    ``x* log(P_D / P_F) + (1 - x*) log((1 - P_D) / (1 - P_F)) = 0``, so
+    ``x* = log((1 - P_F) / (1 - P_D)) / [log(P_D / P_F) + log((1 - P_F) / (1 - P_D))]``."""
+    pd, pf = _open_unit(pd, "pd"), _open_unit(pf, "pf")
+    if pd <= pf:
+        raise ValueError(f"pd must exceed pf (an informative detector), got pd={pd}, pf={pf}")
+    against = np.log((1.0 - pf) / (1.0 - pd))
+    return float(against / (np.log(pd / pf) + against))
+
+
 def _bernoulli_kl(l_p: np.ndarray, l_q: np.ndarray) -> np.ndarray:
     """Per-cell (4.25) between Bernoullis given by their log-odds, stable for any finite log-odds."""
     p = expit(l_p)
@@ -130,22 +167,48 @@ def beta_entropy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return betaln(a, b) - (a - 1.0) * digamma(a) - (b - 1.0) * digamma(b) + (a + b - 2.0) * digamma(a + b)
 
 
-class _Grid:
-    """What both grid types share: geometry checks and the static-belief protocol."""
+def _clock(forgetting, epoch) -> int | None:
+    """The epoch of a new grid: ``None`` for a static grid, else a non-negative tick (0 by default)."""
+    if forgetting is None:
+        if epoch is not None:
+            raise ValueError(f"a static grid (no forgetting) has no epoch, got {epoch!r}")
+        return None
+    if not isinstance(forgetting, Forgetting):
+        raise ValueError(f"forgetting must be a Forgetting, got {type(forgetting).__name__}")
+    epoch = 0 if epoch is None else epoch
+    if isinstance(epoch, bool) or not isinstance(epoch, int | np.integer) or epoch < 0:
+        raise ValueError(f"grid epoch must be a non-negative integer tick, got {epoch!r}")
+    return int(epoch)
 
-    epoch = None  # a static belief: never aligned in time (see fusion.channel_filter)
+
+class _Grid:
+    """What both grid types share: geometry checks and the time protocol (static, or forgetting)."""
 
     def _check(self, other) -> None:
         if type(other) is not type(self):
             raise ValueError(f"expected a {type(self).__name__}, got {type(other).__name__}")
         self.geometry.check_same(other.geometry)
-        for name in self._prior_fields:
+        for name in (*self._prior_fields, "forgetting", "epoch"):
             if getattr(self, name) != getattr(other, name):
                 raise ValueError(f"{name} mismatch: {getattr(self, name)} vs {getattr(other, name)}")
 
     def advanced_to(self, epoch):
-        """A static grid is the same at every epoch."""
-        return self
+        """The grid at tick ``epoch``: its evidence times ``forgetting.factor(epoch - self.epoch)``
+        (:mod:`fusion.grid_forgetting`). A static grid is the same at every epoch."""
+        if self.forgetting is None or epoch is None or epoch == self.epoch:
+            return self
+        if isinstance(epoch, bool) or not isinstance(epoch, int | np.integer) or epoch < self.epoch:
+            raise ValueError(f"a grid at tick {self.epoch} cannot be advanced to {epoch!r} (only forward)")
+        out = self.scaled(self.forgetting.factor(int(epoch - self.epoch)))
+        out.epoch = int(epoch)
+        return out
+
+    def _at_newest(self, other):
+        """Both grids advanced to the newer of their ticks (for reading: combining requires one tick)."""
+        if self.epoch is None or other.epoch is None:
+            return self, other
+        epoch = max(self.epoch, other.epoch)
+        return self.advanced_to(epoch), other.advanced_to(epoch)
 
     def _probability_range(self) -> tuple[float, float]:
         p = self.probability()
@@ -157,11 +220,11 @@ class LogOddsGrid(_Grid):
     ``fuse`` is ``e_a + e_b`` and ``remove`` ``e_a - e_c``, i.e. ``l_a + l_b - l0`` as in DESIGN §2 and
     Merino (4.4), Alg. 4.3."""
 
-    __slots__ = ("geometry", "evidence", "prior", "clamp", "_l0", "_lmax")
+    __slots__ = ("geometry", "evidence", "prior", "clamp", "_l0", "_lmax", "forgetting", "epoch")
     _prior_fields = ("prior",)
 
     def __init__(self, geometry: GridGeometry, evidence: np.ndarray | None = None, prior: float = 0.5,
-                 clamp: float = DEFAULT_CLAMP):
+                 clamp: float = DEFAULT_CLAMP, forgetting: Forgetting | None = None, epoch: int | None = None):
         if not isinstance(geometry, GridGeometry):
             raise GridGeometryError(f"geometry must be a GridGeometry, got {type(geometry).__name__}")
         prior, clamp = real_number(prior, "prior"), real_number(clamp, "clamp")
@@ -172,19 +235,21 @@ class LogOddsGrid(_Grid):
         if not 1.0 - clamp <= prior <= clamp:
             raise ValueError(f"prior {prior} lies outside the clamp range [{1.0 - clamp}, {clamp}]")
         self.geometry, self.prior, self.clamp = geometry, prior, clamp
+        self.forgetting, self.epoch = forgetting, _clock(forgetting, epoch)
         self._l0, self._lmax = float(logit(prior)), float(logit(clamp))
         self.evidence = _field(np.zeros(geometry.shape) if evidence is None else evidence, "evidence", geometry.shape)
 
     @classmethod
-    def uniform(cls, geometry: GridGeometry, prior: float = 0.5, clamp: float = DEFAULT_CLAMP) -> LogOddsGrid:
+    def uniform(cls, geometry: GridGeometry, prior: float = 0.5, clamp: float = DEFAULT_CLAMP,
+                forgetting: Forgetting | None = None, epoch: int | None = None) -> LogOddsGrid:
         """Every cell at the prior (Merino Alg. 4.3, line 1)."""
-        return cls(geometry, None, prior, clamp)
+        return cls(geometry, None, prior, clamp, forgetting, epoch)
 
     def _like(self, evidence: np.ndarray, operand: str = "the operand") -> LogOddsGrid:
         """A grid with ``evidence`` (the result of an operation on ``operand``, named in errors)."""
         new = object.__new__(LogOddsGrid)
-        new.geometry, new.prior, new.clamp, new._l0, new._lmax = (
-            self.geometry, self.prior, self.clamp, self._l0, self._lmax)
+        new.geometry, new.prior, new.clamp, new._l0, new._lmax, new.forgetting, new.epoch = (
+            self.geometry, self.prior, self.clamp, self._l0, self._lmax, self.forgetting, self.epoch)
         new.evidence = _frozen(evidence, f"evidence after adding {operand}")
         return new
 
@@ -204,9 +269,10 @@ class LogOddsGrid(_Grid):
         return -(p * log_expit(l) + (1.0 - p) * log_expit(-l))
 
     def kl_divergence(self, other: LogOddsGrid) -> float:
-        """(4.25) ``D(self || other)`` summed over cells (clamped probabilities)."""
-        self._check(other)
-        return float(_bernoulli_kl(self.log_odds(), other.log_odds()).sum())
+        """(4.25) ``D(self || other)`` summed over cells (clamped probabilities), at the newer tick."""
+        a, b = self._at_newest(other)
+        a._check(b)
+        return float(_bernoulli_kl(a.log_odds(), b.log_odds()).sum())
 
     def allclose(self, other: LogOddsGrid, atol: float = 1e-9) -> bool:
         self._check(other)
@@ -259,30 +325,36 @@ class BetaGrid(_Grid):
     """Beta evidence grid (Merino §4.4-4.6): per cell ``B(alpha0 + a, beta0 + b)``, with evidence counts
     ``a, b >= 0`` (the ``alpha``/``beta`` attributes) and prior ``alpha0, beta0 > 0``."""
 
-    __slots__ = ("geometry", "alpha", "beta", "alpha0", "beta0")
+    __slots__ = ("geometry", "alpha", "beta", "alpha0", "beta0", "forgetting", "epoch", "boundary")
     _prior_fields = ("alpha0", "beta0")
 
     def __init__(self, geometry: GridGeometry, alpha: np.ndarray | None = None, beta: np.ndarray | None = None,
-                 alpha0: float = 1.0, beta0: float = 1.0):
+                 alpha0: float = 1.0, beta0: float = 1.0, forgetting: Forgetting | None = None,
+                 epoch: int | None = None, boundary: float | None = None):
         if not isinstance(geometry, GridGeometry):
             raise GridGeometryError(f"geometry must be a GridGeometry, got {type(geometry).__name__}")
         alpha0, beta0 = real_number(alpha0, "alpha0"), real_number(beta0, "beta0")
         if alpha0 <= 0.0 or beta0 <= 0.0:
             raise ValueError(f"the Beta prior must be positive, got alpha0={alpha0}, beta0={beta0}")
         self.geometry, self.alpha0, self.beta0 = geometry, alpha0, beta0
+        self.forgetting, self.epoch = forgetting, _clock(forgetting, epoch)
+        self.boundary = None if boundary is None else _open_unit(boundary, "boundary")
         zeros = np.zeros(geometry.shape)
         self.alpha = _non_negative(_field(zeros if alpha is None else alpha, "alpha", geometry.shape), "alpha")
         self.beta = _non_negative(_field(zeros if beta is None else beta, "beta", geometry.shape), "beta")
 
     @classmethod
-    def uniform(cls, geometry: GridGeometry, alpha0: float = 1.0, beta0: float = 1.0) -> BetaGrid:
+    def uniform(cls, geometry: GridGeometry, alpha0: float = 1.0, beta0: float = 1.0,
+                forgetting: Forgetting | None = None, epoch: int | None = None,
+                boundary: float | None = None) -> BetaGrid:
         """No evidence yet; ``alpha0 = beta0 = 1`` is Merino's uninformed prior (Alg. 4.5, line 1)."""
-        return cls(geometry, None, None, alpha0, beta0)
+        return cls(geometry, None, None, alpha0, beta0, forgetting, epoch, boundary)
 
     def _like(self, alpha: np.ndarray, beta: np.ndarray, operand: str = "the operand") -> BetaGrid:
         """A grid with these counts (the result of an operation on ``operand``, named in errors)."""
         new = object.__new__(BetaGrid)
         new.geometry, new.alpha0, new.beta0 = self.geometry, self.alpha0, self.beta0
+        new.forgetting, new.epoch, new.boundary = self.forgetting, self.epoch, self.boundary
         new.alpha = _frozen(alpha, f"alpha after adding {operand}")
         new.beta = _frozen(beta, f"beta after adding {operand}")
         return new
@@ -303,7 +375,11 @@ class BetaGrid(_Grid):
         return a * b / ((a + b) ** 2 * (a + b + 1.0))
 
     def probability(self) -> np.ndarray:
-        return self.mean()
+        """The cell's fire probability: ``P(X > boundary) = 1 - I_boundary(alpha, beta)`` (module docstring),
+        or the mean (4.28) without a boundary."""
+        if self.boundary is None:
+            return self.mean()
+        return betaincc(*self.shape_parameters(), self.boundary)
 
     def entropy(self) -> np.ndarray:
         """Differential entropy of each cell's Beta (nats): ``ln B(a, b) - (a-1) digamma(a) - (b-1) digamma(b)
@@ -311,9 +387,11 @@ class BetaGrid(_Grid):
         return beta_entropy(*self.shape_parameters())
 
     def kl_divergence(self, other: BetaGrid) -> float:
-        """(4.25) between the mean cell probabilities, summed over cells: ``D(self || other)``."""
-        self._check(other)
-        (a, b), (c, d) = self.shape_parameters(), other.shape_parameters()
+        """(4.25) between the mean cell probabilities, summed over cells: ``D(self || other)``, at the newer
+        tick."""
+        mine, theirs = self._at_newest(other)
+        mine._check(theirs)
+        (a, b), (c, d) = mine.shape_parameters(), theirs.shape_parameters()
         return float(_bernoulli_kl(np.log(a) - np.log(b), np.log(c) - np.log(d)).sum())
 
     def allclose(self, other: BetaGrid, atol: float = 1e-9) -> bool:
@@ -344,12 +422,13 @@ class BetaGrid(_Grid):
 
     def remove(self, common: BetaGrid) -> BetaGrid:
         """(4.36): subtract the common counts. Raises ``ValueError`` if a count would fall below
-        ``-REMOVE_TOLERANCE`` (``common`` holds evidence this grid does not); tinier negatives become 0."""
+        ``-(REMOVE_TOLERANCE + REMOVE_RELATIVE * common)`` (``common`` holds evidence this grid does not);
+        tinier negatives (rounding) become 0."""
         self._check(common)
         out = []
         for name, mine, theirs in (("alpha", self.alpha, common.alpha), ("beta", self.beta, common.beta)):
             diff = mine - theirs
-            bad = int((diff < -REMOVE_TOLERANCE).sum())
+            bad = int((diff < -(REMOVE_TOLERANCE + REMOVE_RELATIVE * theirs)).sum())
             if bad:
                 raise ValueError(f"removing more {name} evidence than the grid holds in {bad} cells")
             out.append(np.maximum(diff, 0.0))

@@ -15,7 +15,6 @@ import numpy as np
 from agent.beliefs.grid_config import GridConfig
 from agent.beliefs.grid_exchange import GridReceiver
 from agent.net import wire
-from fusion.grid_layers import GridLayers
 from mesh_sim.fire_scoring import roc
 
 __all__ = ["GridOracle", "EVAL_PERIOD", "grid_extent"]
@@ -27,7 +26,7 @@ class GridOracle:
     def __init__(self, config: GridConfig, area: tuple[float, float, float, float], terrain):
         self.config = config
         self.geometry = config.geometry(area, terrain)
-        self.beliefs = GridLayers(config.belief, self.geometry)
+        self.beliefs = config.layers(self.geometry)
         self.central = self.beliefs.uniform()
         self.receiver = GridReceiver(self.geometry.shape, self.beliefs.layers)
         self.agents: dict[str, object] = {}  # agent -> its latest grid as broadcast
@@ -36,20 +35,26 @@ class GridOracle:
         self._next_eval = 0.0
 
     def add_evidence(self, env: wire.Envelope) -> None:
+        """One frame's evidence, at the tick of its stamp: the map is first advanced to that tick (forgetting,
+        :mod:`fusion.grid_forgetting`, as every agent does), and a frame older than the map's tick enters
+        already forgotten by the ticks it missed — the centralized map forgets exactly as the agents do."""
         p = env.payload
         try:
             index = np.asarray(p["index"], np.int64)
-            if self.config.belief == "logodds":
-                self.central = self.central.update_cells(index, np.asarray(p["llr"], float))
-            else:
-                self.central = self.central.update_cells(index, np.asarray(p["m"], float), np.asarray(p["n"], float))
+            values = [np.asarray(p[k], float) for k in (("llr",) if self.config.belief == "logodds" else ("m", "n"))]
+            if self.central.epoch is not None:
+                epoch = self.beliefs.epoch_of(env.stamp)
+                self.central = self.central.advanced_to(max(epoch, self.central.epoch))
+                late = self.config.forgetting.factor(self.central.epoch - epoch)
+                values = [late * v for v in values]
+            self.central = self.central.update_cells(index, *values)
         except (KeyError, TypeError, ValueError, IndexError):
             self.rejected += 1
 
     def add_grid(self, env: wire.Envelope) -> None:
         try:
             layers = self.receiver.decode(env.origin, env.seq, env.payload.get("grid"))
-            self.agents[env.origin] = self.beliefs.from_layers(layers)
+            self.agents[env.origin] = self.beliefs.from_layers(layers, self.beliefs.epoch_of(env.stamp))
         except (wire.DecodeError, ValueError, AttributeError):
             self.rejected += 1
 

@@ -10,8 +10,10 @@ import numpy as np
 from agent.net.grid_codec import check_tolerance
 from agent.sensors.fire_camera_config import FireCameraConfig
 from fusion.channel_filter import Policy
+from fusion.grid import detection_boundary
+from fusion.grid_forgetting import Forgetting
 from fusion.grid_geometry import GridGeometry
-from fusion.grid_layers import BELIEFS
+from fusion.grid_layers import BELIEFS, GridLayers
 from perception.grid_sensor_model import DetectionModel, PoseNoise
 
 INTERSECTS = ("chernoff", "max", "half")
@@ -29,6 +31,7 @@ class GridConfig:
     delta_tolerance: float = 0.0  # deadband q: a cell travels when |x - b| > q max(1, |b|) (0: every float32 change)
     alarm_threshold: float = 0.8  # cell probability above which cells form alarms (Merino's example value)
     alarm_period: float = 5.0  # s between alarm extractions, T of Merino §4.2.2 (chosen here)
+    half_life: float = 0.0  # s: evidence forgetting on the common clock (fusion.grid_forgetting); 0: static grid
     plan_spread: float = 0.0  # planning only: omega of (6.6) per planning step (0: plan on the map as it is)
     plan_steps: int = 4  # planning only: fire-spread steps predicted before the entropy is computed (chosen here)
     detection: DetectionModel = field(default_factory=DetectionModel)
@@ -47,6 +50,9 @@ class GridConfig:
                 raise ValueError(f"grid.{name} must be a positive number, got {value!r}")
         if not 0.0 < self.alarm_threshold < 1.0:
             raise ValueError(f"grid.alarm_threshold must be in (0, 1), got {self.alarm_threshold!r}")
+        life = self.half_life
+        if isinstance(life, bool) or not isinstance(life, int | float) or not (math.isfinite(life) and life >= 0):
+            raise ValueError(f"grid.half_life must be a number of seconds >= 0 (0: no forgetting), got {life!r}")
         if not 0.0 <= self.plan_spread <= 1.0:
             raise ValueError(f"grid.plan_spread must be a probability, got {self.plan_spread!r}")
         if isinstance(self.plan_steps, bool) or not isinstance(self.plan_steps, int) or self.plan_steps < 1:
@@ -57,6 +63,17 @@ class GridConfig:
                              "the channel filters' subtraction (Merino (4.36)) negative where counts are small")
         if isinstance(self.keyframe_every, bool) or not isinstance(self.keyframe_every, int) or self.keyframe_every < 1:
             raise ValueError(f"grid.keyframe_every must be a positive integer, got {self.keyframe_every!r}")
+
+    @property
+    def forgetting(self) -> Forgetting | None:
+        """The forgetting of ``half_life`` (``None``: a static grid)."""
+        return Forgetting(self.half_life) if self.half_life > 0 else None
+
+    def layers(self, geometry: GridGeometry) -> GridLayers:
+        """The grid beliefs of these settings on ``geometry``: the belief type, the forgetting, and for Beta
+        the fire boundary of the thermal camera's ``(P_D, P_F)`` (:func:`fusion.grid.detection_boundary`)."""
+        boundary = detection_boundary(self.detection.pd, self.detection.pf) if self.belief == "beta" else None
+        return GridLayers(self.belief, geometry, self.forgetting, boundary)
 
     def geometry(self, area: tuple[float, float, float, float], terrain) -> GridGeometry:
         """The grid over the scenario ``area`` (north min, max, east min, max), cell centres on the (flat)

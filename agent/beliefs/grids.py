@@ -40,7 +40,6 @@ from fusion.fire_spread import FireSpreadModel
 from fusion.grid_alarms import Alarm, extract_alarms
 from fusion.grid_geometry import GridGeometry
 from fusion.grid_intersect import chernoff_intersect, half_intersect, max_intersect
-from fusion.grid_layers import GridLayers
 from fusion.resync import Edge
 from tasking.base import MapView
 
@@ -58,7 +57,7 @@ class GridExchange:
         self.config = config
         self.outbox = outbox
         self.geometry = config.geometry(area, terrain)
-        self.beliefs = GridLayers(config.belief, self.geometry)
+        self.beliefs = config.layers(self.geometry)
         self.grid = self.beliefs.uniform()
         # the channel filters remember as many sent grids as the exchange does: a whole grid per message
         self.channels = ChannelFilter(self.beliefs.uniform(), config.policy, INTERSECT_RULES[config.intersect],
@@ -85,7 +84,9 @@ class GridExchange:
 
     # -- local evidence ---------------------------------------------------------------------------
     def absorb(self, t: float, observations: Observations) -> None:
-        """One frame's cell evidence updates the local grid and goes to the simulator's centralized map."""
+        """One frame's cell evidence updates the local grid (first advanced to the tick of ``t``: forgetting,
+        :mod:`fusion.grid_forgetting`) and goes to the simulator's centralized map."""
+        self._advance(t)
         ev = observations["fire_evidence"]
         if self.config.belief == "logodds":
             self.grid = self.grid.update_cells(ev.index, ev.llr)
@@ -93,6 +94,13 @@ class GridExchange:
             self.grid = self.grid.update_cells(ev.index, ev.m, ev.n)
         self.outbox.to_simulator("grid_evidence", t, {"index": ev.index.astype(np.int32), "llr": ev.llr,
                                                       "m": ev.m, "n": ev.n})
+
+    def _advance(self, t: float) -> None:
+        """The grid and the layers it reads to the tick of ``t`` (never back: a grid from a peer whose clock is
+        ahead may have moved ours on already)."""
+        if self.grid.epoch is not None:
+            self.beliefs.epoch = max(self.beliefs.epoch_of(t), self.grid.epoch)
+            self.grid = self.grid.advanced_to(self.beliefs.epoch)
 
     def probability(self) -> np.ndarray:
         return self.grid.probability()
@@ -156,7 +164,7 @@ class GridExchange:
             raise wire.DecodeError("bad_field", "grid acks must map peers to sequence numbers")
         layers = self.receiver.decode(origin, seq, payload.get("grid"))
         try:
-            received = self.beliefs.from_layers(layers)
+            received = self.beliefs.from_layers(layers, self.beliefs.epoch_of(stamp))  # the tick it was sent at
         except ValueError as err:  # e.g. negative Beta counts
             raise wire.DecodeError("grid_bad_values", str(err)) from None
         ours = acks.get(self.me)
@@ -164,6 +172,7 @@ class GridExchange:
             self.sender.acknowledge(origin, ours)
         out = self.channels.on_receive(origin, self.grid, received, ours, seq, edge)
         self.grid = out.fused
+        self._advance(t)  # a peer's clock ahead of ours moved the grid on: what we send is read at its tick
         self.fusions[out.method] += 1
         return [(f"grid_{out.method}", out.cause)]
 
