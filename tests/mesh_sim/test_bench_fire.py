@@ -43,15 +43,17 @@ def _verdicts(rows, bytes_per_s=None):
 
 
 def test_the_windowed_goals_pass_when_every_window_after_the_first_detection_meets_them():
-    rows = [_row("hybrid", 0, detection=0.0, error=None, before=True), _row("hybrid", 1), _row("hybrid", 2),
-            _row("hybrid-beta", 0, detection=0.96, rejection=0.8, error=0.99)]
+    # the window that saw the first detection (1) holds time before it: it is not judged
+    rows = [_row("hybrid", 0, detection=0.0, error=None, before=True),
+            _row("hybrid", 1, detection=0.3, rejection=0.5, error=3.0), _row("hybrid", 2), _row("hybrid", 3),
+            _row("hybrid-beta", 0, detection=0.2), _row("hybrid-beta", 1, detection=0.96, rejection=0.8, error=0.99)]
     verdicts = _verdicts(rows)
     assert len(verdicts) == 6 and all(verdicts.values())
 
 
 @pytest.mark.parametrize("bad", [{"detection": 0.9}, {"rejection": 0.75}, {"error": 1.0}])
 def test_one_window_after_the_first_detection_missing_a_goal_is_a_miss(bad):
-    rows = [_row("hybrid", 0), _row("hybrid", 1, **bad), _row("hybrid", 2)]
+    rows = [_row("hybrid", 0), _row("hybrid", 1), _row("hybrid", 2, **bad), _row("hybrid", 3)]
     verdicts = _verdicts(rows)
     assert sum(not ok for ok in verdicts.values()) == 1
 
