@@ -2,7 +2,8 @@
 
 * ``skymesh bench NAME [--quick] [--json PATH]`` — run a benchmark of :data:`mesh_sim.bench.BENCHMARKS`
   and print its tables (optionally writing the result as JSON); ``skymesh bench scale [--sensor bearing|camera]
-  [--sizes 8,16,32]`` — the options of :data:`BENCH_OPTIONS`, for the benchmarks that take them;
+  [--sizes 8,16,32]``, ``skymesh bench fire [--seeds N]`` — the options of :data:`BENCH_OPTIONS`, for the
+  benchmarks that take them;
 * ``skymesh bench --list`` — list the benchmarks;
 * ``skymesh run [--scenario NAME|FILE] [--agents N] [--duration S] [--speed X] [--seed K] [--out DIR]
   [--policy P] [--rerun save|spawn|connect:URL|off] [--camera uavK=SOURCE ...] [--vehicle kinematic|mavlink]``
@@ -41,7 +42,8 @@ from mesh_sim.bench.common import make_console, write_json
 
 EXIT_USAGE = 2
 STOPPED_BY = {"interrupted": 130, "terminated": 143}  # a run stopped by SIGINT / SIGTERM: 128 + the signal
-BENCH_OPTIONS = ("sizes", "sensor")  # benchmark options beyond --quick and --json, for the benchmarks naming them
+#: benchmark options beyond --quick and --json, for the benchmarks naming them
+BENCH_OPTIONS = ("sizes", "sensor", "seeds")
 
 
 def _positive_int(text: str) -> int:
@@ -74,6 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--sizes", type=_sizes, metavar="N,N,...",
                        help="scale: the team sizes to run, e.g. 8,16,32,40,48 (default: each sensor's own)")
     bench.add_argument("--sensor", choices=sorted(SENSORS), help="scale: measure this sensor only (default: each)")
+    bench.add_argument("--seeds", type=_positive_int, metavar="N",
+                       help="fire: run N seeds (default: 5, or 1 with --quick)")
 
     for name, text in (("run", "run a team of agents on a scenario"), ("demo", "run the default scenario")):
         run = commands.add_parser(name, help=text, description=text)

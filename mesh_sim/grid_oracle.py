@@ -6,9 +6,13 @@ agent's log-likelihood ratios; for Beta grids the sum of the pseudo-counts): it 
 decentralized grid fusion is judged against, as the tracking oracle is for targets. It also listens to
 the agents' own grid messages (decoding their deltas like any receiver) to follow each agent's map, and
 records ``KL(centralized || agent)`` (Merino (4.25), summed over cells) every ``EVAL_PERIOD`` seconds.
+At the end of every scoring window (:mod:`mesh_sim.fire_windows`) it scores the centralized map and each
+agent's at the alarm threshold against the truth of that time, which ``truth(t)`` (the world's) gives.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -16,6 +20,10 @@ from agent.beliefs.grid_config import GridConfig
 from agent.beliefs.grid_exchange import GridReceiver
 from agent.net import wire
 from mesh_sim.fire_scoring import roc
+from mesh_sim.fire_windows import FireWindows
+
+#: ``truth(t) -> (fire regions, decoys)`` at simulation time ``t`` (:func:`mesh_sim.fire_scoring.score_alarms`)
+Truth = Callable[[float], tuple[list[dict], list]]
 
 __all__ = ["GridOracle", "EVAL_PERIOD", "grid_extent"]
 
@@ -23,7 +31,7 @@ EVAL_PERIOD = 2.0  # s between KL samples (chosen here)
 
 
 class GridOracle:
-    def __init__(self, config: GridConfig, area: tuple[float, float, float, float], terrain):
+    def __init__(self, config: GridConfig, area: tuple[float, float, float, float], terrain, truth: Truth):
         self.config = config
         self.geometry = config.geometry(area, terrain)
         self.beliefs = config.layers(self.geometry)
@@ -33,6 +41,9 @@ class GridOracle:
         self.kl: dict[str, list[tuple[float, float]]] = {}  # agent -> [(t, KL)]
         self.rejected = 0
         self._next_eval = 0.0
+        self.truth = truth
+        self.windows = FireWindows(self.geometry, config.alarm_threshold)
+        self.now = 0.0
 
     def add_evidence(self, env: wire.Envelope) -> None:
         """One frame's evidence, at the tick of its stamp: the map is first advanced to that tick (forgetting,
@@ -59,6 +70,10 @@ class GridOracle:
             self.rejected += 1
 
     def evaluate(self, t: float) -> None:
+        """KL samples every ``EVAL_PERIOD``; the window scores at the end of every window."""
+        self.now = t
+        if self.windows.due(t):
+            self.windows.record(t, *self._maps(), *self.truth(t))
         if t + 1e-9 < self._next_eval:
             return
         self._next_eval = t + EVAL_PERIOD
@@ -77,8 +92,17 @@ class GridOracle:
             arrays["truth"], arrays["truth_extent"] = truth, np.array(truth_extent)
         np.savez_compressed(path, **arrays)
 
+    def _maps(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Cell probabilities of the centralized map and of each agent's."""
+        return self.central.probability(), {agent: grid.probability() for agent, grid in self.agents.items()}
+
     def summary(self, regions: list[dict], decoys: list) -> dict:
-        """KL series per agent, and the alarm scores (ROC) of the centralized map and of each agent's."""
+        """KL series per agent, the alarm scores (ROC) of the centralized map and of each agent's against the
+        truth now (``regions``, ``decoys``), and the per-window scores (a last partial window up to now)."""
+        windows = list(self.windows.series)
+        if self.windows.pending(self.now):
+            windows.append(self.windows.score(self.now, *self._maps(), regions, decoys))
+
         def scores(grid) -> list[dict]:
             return roc(grid.probability(), self.geometry, regions, decoys)
 
@@ -86,6 +110,7 @@ class GridOracle:
             "belief": self.config.belief,
             "cells": self.geometry.size,
             "rejected": self.rejected,
+            "windows": windows,
             "central": {"roc": scores(self.central)},
             "agents": {
                 agent: {"kl_series": self.kl.get(agent, []),

@@ -62,7 +62,8 @@ class World:
         sc = scenario.agent
         terrain = terrain_from_config(sc.terrain)
         self.fire = None if scenario.fire is None else FireWorld(scenario.fire, terrain, sc.seed)
-        self.grid_oracle = None if sc.grid is None else GridOracle(sc.grid, sc.area.as_tuple(), terrain)
+        self.grid_oracle = None if sc.grid is None else GridOracle(sc.grid, sc.area.as_tuple(), terrain,
+                                                                   self.fire_truth)
         self.particles = (ParticleOracle(sc.tracking.particle_init, sc.seed)
                           if sc.tracking.initiation == "particles" else None)
 
@@ -128,6 +129,11 @@ class World:
         if position.shape == (3,) and np.all(np.isfinite(position)):
             self.uavs[env.origin] = position.tolist()
 
+    def fire_truth(self, t: float) -> tuple[list[dict], list]:
+        """The fire regions (none without a fire) and the decoys at ``t``: what fire maps are scored against."""
+        regions = [] if self.fire is None else self.fire.fire_regions(t)
+        return regions, [list(d) for d in self.scenario.decoys]
+
     def tick(self, t: float) -> None:
         self.publish_truth(t)
         self.absorb_measurements()
@@ -156,8 +162,8 @@ class World:
         if self.particles is not None:
             out["particles"] = self.particles.summary()
         if self.grid_oracle is not None:
-            regions = [] if self.fire is None else self.fire.fire_regions(self.now)
-            out["grid"] = {**self.grid_oracle.summary(regions, list(self.scenario.decoys)), "fire_regions": regions}
+            regions, decoys = self.fire_truth(self.now)
+            out["grid"] = {**self.grid_oracle.summary(regions, decoys), "fire_regions": regions}
         return out
 
 

@@ -11,7 +11,7 @@ To add a benchmark, write a module in this package that defines
 and add a :class:`Benchmark` entry to :data:`BENCHMARKS`. Modules are imported only when their
 benchmark runs, so ``skymesh bench --list`` stays fast.
 
-A benchmark that takes more of the ``skymesh bench`` options (``--sizes``, ``--sensor``: see
+A benchmark that takes more of the ``skymesh bench`` options (``--sizes``, ``--sensor``, ``--seeds``: see
 :data:`mesh_sim.cli.BENCH_OPTIONS`) names them in its entry's ``options``; its ``run`` receives them as keyword
 arguments when they are given, and the command line refuses them for any other benchmark.
 """
@@ -99,8 +99,10 @@ BENCHMARKS: dict[str, Benchmark] = {
         Benchmark(
             "fire",
             "mesh_sim.bench.fire",
-            "fire scenario, lockstep Monte Carlo: alarm detection, false-alarm rejection, localisation error, grid "
-            "bytes/s with and without delta encoding",
+            "whole fire missions (120 s, 5 seeds), lockstep: per 30 s window, alarm detection, decoy rejection and "
+            "localisation of every agent's map, log-odds and Beta, hybrid / naive / tree / ring; grid bytes delta vs "
+            "keyframe (--seeds N)",
+            options=("seeds",),
         ),
         Benchmark(
             "tasking",

@@ -96,6 +96,7 @@ def test_bad_arguments_exit_2(argv):
     (["bench", "scale", "--sizes", "8,,16"], "--sizes: must be positive integers"),
     (["bench", "scale", "--sizes", "eight"], "--sizes: must be positive integers"),
     (["bench", "scale", "--sensor", "lidar"], "--sensor: invalid choice: 'lidar'"),
+    (["bench", "fire", "--seeds", "0"], "--seeds: must be a positive integer, got 0"),
 ])
 def test_bad_scale_options_exit_2_and_say_why(argv, message, capsys):
     with pytest.raises(SystemExit) as excinfo:
@@ -108,6 +109,18 @@ def test_scale_options_are_refused_by_other_benchmarks(monkeypatch, capsys):
     monkeypatch.setattr(fusion_ops, "run", lambda **kwargs: pytest.fail("the benchmark must not run"))
     assert cli.main(["bench", "fusion-ops", "--quick", "--sizes", "2"]) == 2
     assert "--sizes is not an option of this benchmark (only of: scale)" in capsys.readouterr().err
+    assert cli.main(["bench", "fusion-ops", "--quick", "--seeds", "2"]) == 2
+    assert "--seeds is not an option of this benchmark (only of: fire)" in capsys.readouterr().err
+
+
+def test_the_seeds_option_reaches_the_fire_benchmark(monkeypatch):
+    from mesh_sim.bench import fire
+
+    seen = {}
+    monkeypatch.setattr(fire, "run", lambda **kwargs: seen.update(kwargs) or {"benchmark": "fire", "rows": []})
+    monkeypatch.setattr(fire, "report", lambda result, console=None: None)
+    assert cli.main(["bench", "fire", "--seeds", "2"]) == 0
+    assert seen == {"quick": False, "repeats": None, "seeds": 2}
 
 
 def test_scale_options_reach_the_benchmark(monkeypatch, tmp_path):
