@@ -39,8 +39,13 @@ _TOPOLOGIES = {"hybrid": ("hybrid", "full"), "naive": ("naive", "full"), "tree":
 
 
 def _config(policy: str, topology: str, belief: str = "logodds", delta: bool = True) -> dict:
-    """Scenario overrides of one configuration."""
-    return {"grid": {"policy": policy, "belief": belief, "delta": delta}, "radio": {"topology": topology}}
+    """Scenario overrides of one configuration. Beta grids send exact deltas (``delta_tolerance = 0``: a
+    deadband on counts would make the channel filters' subtraction negative, :class:`agent.beliefs.grid_config.
+    GridConfig`); log-odds grids keep the scenario's deadband."""
+    grid = {"policy": policy, "belief": belief, "delta": delta}
+    if belief == "beta":
+        grid["delta_tolerance"] = 0.0
+    return {"grid": grid, "radio": {"topology": topology}}
 
 
 CONFIGS = {

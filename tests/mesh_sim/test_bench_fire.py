@@ -101,3 +101,14 @@ def test_window_rows_pool_agents_and_seeds():
 def test_an_unknown_configuration_is_an_error():
     with pytest.raises(ValueError, match=r"unknown fire bench configuration\(s\) \['bogus'\]"):
         fire.run(quick=True, configs=("bogus",))
+
+
+def test_every_configuration_is_a_valid_fire_scenario():
+    """Each configuration's overrides load on the shipped scenario (a Beta grid with the scenario's log-odds
+    deadband would be refused: the Beta configurations send exact deltas)."""
+    from mesh_sim.bench.fire import CONFIGS
+    from mesh_sim.scenario import load
+
+    for name, overrides in CONFIGS.items():
+        grid = load("fire", **overrides).agent.grid
+        assert grid.belief == ("beta" if "beta" in name else "logodds"), name
