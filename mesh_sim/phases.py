@@ -7,7 +7,8 @@ started again, when every survivor that heard its new incarnation had heard it (
 the next one starts, the last one at the end of the run. A merge, a ``link_up`` and a rejoin *heal* the mesh.
 
 **Figures.** Each phase pools the evaluators' time bins (``bins`` of :class:`agent.evaluation.TrackEvaluator`,
-a bin belonging to the phase its start is in) over every agent and target: fleet RMSE ``sqrt(sum e^2 / n)``,
+a bin belonging to the phase its start is in, the run's last evaluation at ``t = duration`` to the last
+phase) over every agent and target: fleet RMSE ``sqrt(sum e^2 / n)``,
 ANEES ``sum NEES / (6 n)``, the same for the oracle (:class:`mesh_sim.oracle.Oracle`) and the ratio of the
 RMSEs. ANEES is judged against the two-sided 95 % interval of a consistent estimator: ``6 n ANEES ~ chi2(6 n)``
 for ``n`` independent NEES samples of a 6-D state, so the interval is ``chi2.ppf([0.025, 0.975], 6 n) / (6 n)``
@@ -146,7 +147,7 @@ def run_phases(metrics: dict, duration: float) -> list[dict]:
     out = []
     for ph in boundaries(metrics["config"], metrics.get("losses", []), duration):
         t0, t1 = ph["start_s"], ph["end_s"]
-        row = {**ph, **phase_figures(agents, oracle, t0, t1)}
+        row = {**ph, **phase_figures(agents, oracle, t0, math.inf if t1 == duration else t1)}
         if ph["heals"]:
             row["reconverged_after_s"] = reconvergence(agents, oracle, t0, t1)
         out.append(row)
