@@ -33,7 +33,7 @@ from agent.evaluation import BIN_S
 DIM = 6  # the tracked state: position and velocity in 3-D
 CONFIDENCE = 0.95
 WINDOW_S = 5.0  # s: the sliding window of the re-convergence test; chosen here
-RATIO_GOAL = 1.25  # each target's fleet RMSE ÷ oracle RMSE, at most (issue 13's tasking goals)
+RATIO_GOAL = 1.25  # each target's fleet RMSE ÷ oracle RMSE, at most (issue 13; also the tasking benchmarks' goal)
 HEALING = {"merge", "link_up"}  # radio events that give links back
 
 
