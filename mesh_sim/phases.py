@@ -136,7 +136,7 @@ def reconvergence(agents: list[list[dict]], oracle: list[dict], t0: float, t1: f
     ends = [t0 + k * BIN_S for k in range(1, int(math.floor((t1 - t0) / BIN_S + 1e-9)) + 1)]
     series = [(tau, worst_ratio(agents, oracle, max(t0, tau - WINDOW_S), tau)) for tau in ends]
     tau = settled_after(series, RATIO_GOAL)
-    return None if tau is None else tau - t0
+    return None if tau is None else round(tau - t0, 9)
 
 
 def run_phases(metrics: dict, duration: float) -> list[dict]:
