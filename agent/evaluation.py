@@ -7,13 +7,15 @@ perfectly consistent (Bar-Shalom et al., *Estimation with Applications to Tracki
 
 Each target's summary also has a ``tail``: the same figures over the last ``tail_s`` seconds before the
 newest evaluation only, e.g. to see estimates re-converge after a partition heals, which the whole-run
-figures dilute.
+figures dilute. And a ``bins`` list, ``[start_s, squared_errors, nees, samples]`` per :data:`BIN_S` time bin
+(simulation time; a bin starts at ``k BIN_S``) that has samples: the sums behind the figures, so that any
+interval of whole bins can be pooled afterwards (:mod:`mesh_sim.phases`) without keeping every sample.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -21,6 +23,7 @@ from fusion.gaussian import Gaussian
 
 MATCH_GATE = 16.27  # chi-square(3) 99.9 %; chosen here
 TAIL_S = 10.0  # s: the final part of a run that is also summarised on its own; chosen here
+BIN_S = 1.0  # s: the width of the time bins the sums are also kept in; chosen here
 
 
 @dataclass
@@ -29,6 +32,7 @@ class _TargetScore:
     nees: float = 0.0
     count: int = 0
     first_track_t: float | None = None
+    bins: dict[int, list] = field(default_factory=dict)  # bin index -> [squared errors, nees, count]
 
 
 class TrackEvaluator:
@@ -53,17 +57,22 @@ class TrackEvaluator:
             if best is None:
                 continue
             err = best.mean[:3] - state[:3]
-            nees = best.nees(state)
-            score.squared_errors += float(err @ err)
+            squared_error, nees = float(err @ err), best.nees(state)
+            score.squared_errors += squared_error
             score.nees += nees
             score.count += 1
-            self._recent.append((t, target["id"], float(err @ err), nees))
+            sums = score.bins.setdefault(int(np.floor(t / BIN_S + 1e-9)), [0.0, 0.0, 0])
+            sums[0] += squared_error
+            sums[1] += nees
+            sums[2] += 1
+            self._recent.append((t, target["id"], squared_error, nees))
             if score.first_track_t is None:
                 score.first_track_t = t - self.t0
 
     def summary(self) -> list[dict]:
-        """``[{"target", "rmse", "anees", "time_to_first_track", "samples", "tail"}]`` (None where never
-        tracked); ``tail`` is ``{"window_s", "rmse", "anees", "samples"}`` over the last ``tail_s`` seconds."""
+        """``[{"target", "rmse", "anees", "time_to_first_track", "samples", "tail", "bins"}]`` (None where
+        never tracked); ``tail`` is ``{"window_s", "rmse", "anees", "samples"}`` over the last ``tail_s`` seconds,
+        ``bins`` the ``[start_s, squared_errors, nees, samples]`` of each :data:`BIN_S` bin with samples."""
         tails: dict[str, _TargetScore] = {}
         for _, target, squared_error, nees in self._recent:  # record() keeps only the last tail_s seconds
             tail = tails.setdefault(target, _TargetScore())
@@ -76,6 +85,7 @@ class TrackEvaluator:
                 "target": target, **_figures(s),
                 "time_to_first_track": s.first_track_t,
                 "tail": {"window_s": self.tail_s, **_figures(tails.get(target, _TargetScore()))},
+                "bins": [[k * BIN_S, *sums] for k, sums in sorted(s.bins.items())],
             })
         return out
 

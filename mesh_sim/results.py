@@ -5,7 +5,8 @@ and ``anees = sum n_i anees_i / sum n_i``, likewise for the oracle, so ``rmse_ra
 like with like; ``rmse_ratio_to_in_flight`` pools each agent's in-flight oracle (:mod:`mesh_sim.oracle`:
 the centralized filter holding what could have reached that agent) the same way. ``tail_rmse`` and
 ``tail_anees`` pool the targets' ``tail`` figures (the final
-``agent.evaluation.TAIL_S`` seconds of the run) the same way.
+``agent.evaluation.TAIL_S`` seconds of the run) the same way. ``phases`` holds the same figures per phase of
+the run (partition, merge, a lost agent...: :mod:`mesh_sim.phases`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from rich.console import Console
 from rich.table import Table
 
 from agent.runtime import write_json
+from mesh_sim.phases import caption, run_phases
 
 
 def pooled(targets: list[dict]) -> tuple[float | None, float | None]:
@@ -106,6 +108,7 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
         "config": {**scenario.raw, "speed": speed},
         "losses": losses(run_dir, scenario, agents),
     }
+    metrics["phases"] = run_phases(metrics, sc.duration)
     if "grid" in oracle:
         metrics["fleet"]["grid"] = grid_fleet(agents, oracle["grid"], sc)
     write_json(run_dir / "metrics.json", metrics)
@@ -211,7 +214,9 @@ def summary_table(metrics: dict) -> Table:
     table.add_row("fleet", _fmt(f["rmse"], ".2f"), _fmt(f["anees"], ".2f"),
                   f"ratio {_fmt(f['rmse_ratio_to_oracle'], '.2f')}", _in_flight(f), _fmt(f.get("exact_share"), ".0%"),
                   _fmt(f["bytes_per_agent_per_s"], ",.0f"), "", "", "", style="bold")
-    captions = [c for c in (_orbit_caption(o.get("orbits")), *map(_loss_caption, metrics.get("losses", []))) if c]
+    phases = metrics.get("phases", [])
+    captions = [c for c in (_orbit_caption(o.get("orbits")), *map(_loss_caption, metrics.get("losses", [])),
+                            *(map(caption, phases) if len(phases) > 1 else ())) if c]
     table.caption = "\n".join(captions) or None
     return table
 

@@ -28,10 +28,9 @@ from __future__ import annotations
 import math
 from collections import Counter
 
+from mesh_sim.phases import CONFIDENCE, anees_interval
 from mesh_sim.results import pooled
 
-DIM = 6  # the tracked state: position and velocity in 3-D
-CONFIDENCE = 0.95
 DECORRELATION_S = 10.0  # one independent NEES sample per target per this many tracked seconds (motion tau)
 ANEES_FLOOR = 0.5  # issue 11: an agent's ANEES below this is wastefully conservative
 #: Fleet RMSE / oracle RMSE limits (issue 11): (topologies, losses, methods, limit, ratio the goal is on).
@@ -43,15 +42,6 @@ DEMO_LIMIT = 1.25  # the 4-agent `make demo` configuration (issue 11)
 RECOVERY_LIMIT_S = 10.0  # after a merge, every tree-edge channel fuses exactly again within this (issue 11)
 NAIVE = "naive"  # the method that must show the rumour problem (ANEES above the interval)
 GOAL_METHODS = ("hybrid", "flood")  # the methods whose every agent must be consistent
-
-
-def anees_interval(samples: int, dim: int = DIM, confidence: float = CONFIDENCE) -> tuple[float, float]:
-    """Two-sided chi-square interval of ANEES (NEES / dim) averaged over ``samples`` independent samples."""
-    from scipy.stats import chi2
-
-    dof = max(1, samples) * dim
-    tail = (1.0 - confidence) / 2
-    return float(chi2.ppf(tail, dof) / dof), float(chi2.ppf(1.0 - tail, dof) / dof)
 
 
 def independent_samples(per_target_samples: dict, step: float) -> int:

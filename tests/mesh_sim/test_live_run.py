@@ -141,6 +141,9 @@ def test_a_killed_agent_restarted_rejoins_as_its_next_incarnation(tmp_path):
     (loss,) = outcome.metrics["losses"]
     # start-up of a new agent process: ~2 s on an idle machine, 8-9 s measured with the two cores shared 4 ways
     assert loss["restarted_as"] == 1 and all(s is not None and s < 15.0 for s in loss["rejoined_after"].values()), loss
+    names = [p["name"] for p in outcome.metrics["phases"]]  # mesh_sim.phases: cut at the death and the rejoin
+    assert names == ["start", "uav1 lost", "uav1 rejoined"], outcome.metrics["phases"]
+    assert "reconverged_after_s" in outcome.metrics["phases"][2]
 
 
 @pytest.mark.slow
