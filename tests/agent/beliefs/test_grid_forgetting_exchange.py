@@ -34,7 +34,7 @@ def _run(config: GridConfig, edges, tree: bool, seconds=30.0, positive=False, se
     """Every node observes every frame (30 random cells until ``observe_until``, none after), and broadcasts
     every period until ``seconds``."""
     rng = np.random.default_rng(seed)
-    oracle = GridOracle(config, AREA, FlatTerrain())
+    oracle = GridOracle(config, AREA, FlatTerrain(), truth=lambda t: ([], []))  # no fire to score: maps only
     names = sorted({n for e in edges for n in e})
     nodes = {n: GridExchange(n, config, AREA, FlatTerrain(), 1, Simulator(oracle, n)) for n in names}
     neighbours = {n: sorted({b for a, b in edges if a == n} | {a for a, b in edges if b == n}) for n in names}
@@ -95,7 +95,7 @@ def test_bad_half_lives_are_clear_errors(bad):
 
 def test_a_grid_from_a_peer_whose_clock_is_ahead_moves_ours_on_and_what_we_send_is_read_at_that_tick():
     config = GridConfig(cell=10.0, half_life=6.0)
-    oracle = GridOracle(config, AREA, FlatTerrain())
+    oracle = GridOracle(config, AREA, FlatTerrain(), truth=lambda t: ([], []))  # no fire to score: maps only
     ahead, behind = (GridExchange(n, config, AREA, FlatTerrain(), 1, Simulator(oracle, n)) for n in ("a", "b"))
     nothing = types.SimpleNamespace(index=np.zeros(0, int), llr=np.zeros(0), m=np.zeros(0), n=np.zeros(0))
     ahead.absorb(9.0, {"fire_evidence": types.SimpleNamespace(index=np.array([3]), llr=np.array([2.0]),
