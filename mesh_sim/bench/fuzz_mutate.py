@@ -106,7 +106,8 @@ class Mutator:
 
     def _bitflip(self) -> Input:
         data = bytearray(self.seal(self.fresh()))
-        for bit in self.rng.integers(0, 8 * len(data), int(self.rng.integers(1, 9))):
+        bits = min(8 * len(data), int(self.rng.integers(1, 9)))
+        for bit in self.rng.choice(8 * len(data), bits, replace=False):  # distinct bits: never a no-op
             data[bit // 8] ^= 1 << (bit % 8)
         return self._input("bitflip", None, self.case.fleet_key is not None, bytes(data))
 
