@@ -359,7 +359,7 @@ def _check_tree(payload) -> None:
         if depth >= MAX_DEPTH:
             raise DecodeError("malformed", f"payload nested deeper than {MAX_DEPTH}")
         if type(node) is dict:
-            if not all(type(k) is str for k in node):
+            if not set(map(type, node)) <= _STR:
                 raise DecodeError("bad_type", "payload map keys must be str")
             node = node.values()
         kinds = set(map(type, node))  # in C: one pass over the elements
@@ -369,6 +369,7 @@ def _check_tree(payload) -> None:
             stack.extend((child, depth + 1) for child in node if type(child) is dict or type(child) is list)
 
 
+_STR = frozenset({str})
 _NODES = frozenset({dict, list, type(None), bool, int, float, str, bytes, np.ndarray})  # what msgspec, _ext_hook build
 
 

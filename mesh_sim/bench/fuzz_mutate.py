@@ -39,6 +39,7 @@ NEST_BYTES = b"\xa6" + NEST_MARKER.encode()  # ... as MessagePack packs it (a fi
 NEST_DEPTHS = (100, 1_000, 10_000, 100_000)
 EPOCH_SHIFT = (200, 10**9)  # an epoch moved this far is outside the tracks' window (50 steps) both ways
 SEQ_HEADROOM = 1 << 40  # a sender whose window is this close to 2**64 continues under a new name
+HUGE = ([0] * 100_000, "x" * 1_000_000, {f"k{i}": i for i in range(10_000)})  # what ``huge`` puts in a payload
 OTHERS = [None, True, -1, 2**63, 1.5, "x", b"\x00", [], {}, {"a": 1}, [1, "a"], np.zeros(3),
           np.zeros((2, 2), "<i4"), np.array([1.0, np.nan])]  # what a node becomes under ``type``
 
@@ -66,11 +67,10 @@ class Mutator:
     def used(self, inp: Input) -> None:
         """The agent used ``inp``: it may be replayed, and its sequence number is spent."""
         self.last_used = inp
-        try:
-            seq = wire.decode(inp.data, key=self.case.fleet_key, kinds=self.case.agent.kinds).seq
-        except wire.DecodeError:
+        header = wire.peek_header(inp.data)
+        if header is None:
             return
-        self.seq = max(self.seq, seq + 1)
+        self.seq = max(self.seq, header.seq + 1)
         if self.seq > (1 << 64) - SEQ_HEADROOM:  # the window is spent: the same peer under another name
             self.renamed += 1
             self.origin, self.seq = f"{self.case.seed.origin}r{self.renamed}", self.case.next_seq
@@ -133,8 +133,7 @@ class Mutator:
         return self._input("matrix", self.fresh(payload=_replaced(payload, path, value)), invalid)
 
     def _huge(self) -> Input:
-        pick = int(self.rng.integers(3))
-        big = [[0] * 100_000, "x" * 1_000_000, {f"k{i}": i for i in range(10_000)}][pick]
+        big = HUGE[int(self.rng.integers(len(HUGE)))]
         paths = list(_paths(self.case.seed.payload))
         if not paths or self.rng.random() < 0.3:
             payload = {**self.case.seed.payload, "zz": big}
