@@ -44,7 +44,7 @@ from mesh_sim.bench.fuzz_seeds import CASES, Case, cases
 
 NAME = "fuzz"
 FULL_INPUTS, FULL_KEYED = 100_000, 10_000  # per kind, without and with a fleet key
-QUICK_INPUTS, QUICK_KEYED = 1_500, 300
+QUICK_INPUTS, QUICK_KEYED = 1_000, 200  # within a minute (issue 16 suggests ~2,000: a minute holds ~1,200)
 GOAL_INPUTS = 100_000  # per kind (issue 16)
 HANG_S = 0.050  # an input taking longer hangs the agent (issue 16)
 BASELINE_REPEATS = 30  # valid messages received for the baseline time
@@ -100,13 +100,13 @@ class Faults:
     slowest_s: float = 0.0
     busy_s: float = 0.0
 
-    def timed(self, fn, inp: Input) -> None:
+    def timed(self, fn, inp: Input, allowed: tuple[type[Exception], ...] = ()) -> None:
+        """Call ``fn(inp)``: an exception but the ``allowed`` ones is a crash, a call over :data:`HANG_S` a hang."""
         started = time.perf_counter()
         try:
             fn(inp)
-        except wire.DecodeError:
-            if fn.__name__ != "decode":  # receive() must swallow even these
-                self._note("crash", "DecodeError", inp)
+        except allowed:
+            pass
         except Exception as exc:  # noqa: BLE001 - any exception is the finding
             self._note("crash", type(exc).__name__, inp)
         took = time.perf_counter() - started
@@ -148,7 +148,7 @@ def fuzz_case(case: Case, inputs: int, rng: np.random.Generator, target: AgentTa
     for i in range(inputs):
         inp = mutator.make(FAMILIES[i % len(FAMILIES)])
         families[inp.family] += 1
-        decoder.timed(target.decode, inp)
+        decoder.timed(target.decode, inp, (wire.DecodeError,))
         if inp.invalid:
             invalid += 1
             digest = digest or target.digest()
