@@ -31,6 +31,7 @@ import logging
 import pickle
 import resource
 import time
+import warnings
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -191,7 +192,8 @@ def run(quick: bool = False, repeats: int | None = None, inputs: tuple[int, int]
     rows = []
     agent_log = logging.getLogger("skymesh.agent")
     level, _ = agent_log.level, agent_log.setLevel(logging.ERROR)  # one warning per rejection reason: noise here
-    with common.progress(len(all_cases), NAME) as advance:
+    with common.progress(len(all_cases), NAME) as advance, warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # numpy's overflow notes on huge matrices: expected here
         for case in all_cases:
             advance(f"{case.spec.name}{' (keyed)' if case.fleet_key else ''}")
             rows.append(fuzz_case(case, keyed if case.fleet_key else plain, rng))
