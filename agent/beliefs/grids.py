@@ -153,7 +153,8 @@ class GridExchange:
                 t: float) -> list[tuple[str, str | None]]:
         """Decode and fuse a neighbour's grid message. Raises :class:`agent.net.wire.DecodeError` on a bad
         message (nothing is changed then)."""
-        if not isinstance(payload, dict) or payload.get("belief") != self.config.belief:
+        belief = payload.get("belief") if isinstance(payload, dict) else None
+        if not isinstance(belief, str) or belief != self.config.belief:  # an array's != is no bool
             raise wire.DecodeError("grid_geometry", f"expected a {self.config.belief} grid")
         try:
             GridGeometry.from_dict(payload.get("geometry")).check_same(self.geometry)

@@ -68,8 +68,9 @@ class Held:
         if self.has(n):
             return False
         if n > self.high:
-            shift = n - self.high
-            self.mask = ((self.mask << shift) | (1 << (shift - 1))) & ((1 << ACK_SPAN) - 1) if self.high >= 0 else 0
+            shift = n - self.high  # a jump past the span leaves no bit: never shift by it (n may be near 2**64)
+            fits = self.high >= 0 and shift <= ACK_SPAN
+            self.mask = ((self.mask << shift) | (1 << (shift - 1))) & ((1 << ACK_SPAN) - 1) if fits else 0
             self.high = n
         else:
             self.mask |= 1 << (self.high - 1 - n)

@@ -21,6 +21,9 @@ partitioned component can still recognise its own tree edges.
 
 from __future__ import annotations
 
+import math
+
+from agent.net.wire import DecodeError
 from fusion.network import bridges
 from fusion.resync import Edge
 
@@ -67,7 +70,10 @@ class Topology:
     def receive(self, sender: str, reports: dict, t: float) -> None:
         """Merge the ``reports`` ``{agent: (report time, [neighbours])}`` of a topology message from
         ``sender`` (types checked by the wire's schema; newest wins); a report new to us is queued for
-        relaying (:meth:`outgoing`)."""
+        relaying (:meth:`outgoing`). A report time that is not finite rejects the message (``non_finite``; an
+        infinite one would never be superseded): nothing of it is kept."""
+        if not all(math.isfinite(when) for when, _ in reports.values()):
+            raise DecodeError("non_finite", "a topology report time is not finite")
         for agent, (when, neighbours) in reports.items():
             if agent == self.me or (agent in self._reports and when <= self._reports[agent][0]):
                 continue

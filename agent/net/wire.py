@@ -350,20 +350,27 @@ def is_int(value) -> bool:
 def _check_tree(payload) -> None:
     """Depth and leaf types of a generic payload, iteratively (no recursion on hostile input). Only the kinds
     that the ground station and the simulator read are generic (:mod:`agent.net.schemas`): the agents' own
-    traffic never pays this walk."""
+    traffic never pays this walk. The element types of a container are collected in C and only containers are
+    pushed: a 10**5-element list takes milliseconds (not the half second of an ``isinstance`` per element against
+    a type union built each time)."""
     stack = [(payload, 0)]
     while stack:
         node, depth = stack.pop()
-        if isinstance(node, dict | list):
-            if depth >= MAX_DEPTH:
-                raise DecodeError("malformed", f"payload nested deeper than {MAX_DEPTH}")
-            if isinstance(node, dict):
-                if any(not isinstance(k, str) for k in node):
-                    raise DecodeError("bad_type", "payload map keys must be str")
-                node = node.values()
-            stack.extend((child, depth + 1) for child in node)
-        elif not (node is None or isinstance(node, bool | int | float | str | bytes | np.ndarray)):
-            raise DecodeError("bad_type", f"payload holds a {type(node).__name__}")
+        if depth >= MAX_DEPTH:
+            raise DecodeError("malformed", f"payload nested deeper than {MAX_DEPTH}")
+        if type(node) is dict:
+            if not set(map(type, node)) <= _STR:
+                raise DecodeError("bad_type", "payload map keys must be str")
+            node = node.values()
+        kinds = set(map(type, node))  # in C: one pass over the elements
+        if not kinds <= _NODES:
+            raise DecodeError("bad_type", f"payload holds a {min(t.__name__ for t in kinds - _NODES)}")
+        if dict in kinds or list in kinds:
+            stack.extend((child, depth + 1) for child in node if type(child) is dict or type(child) is list)
+
+
+_STR = frozenset({str})
+_NODES = frozenset({dict, list, type(None), bool, int, float, str, bytes, np.ndarray})  # what msgspec, _ext_hook build
 
 
 # -- MAC ---------------------------------------------------------------------------------------------

@@ -90,17 +90,21 @@ def _vector(value, name: str) -> np.ndarray:
 
 def _positions(uavs: dict, me: str) -> dict[str, np.ndarray]:
     """Every other UAV's position, each checked as :func:`_vector` checks one, in one array (the truth brings N of
-    them at every step); a malformed entry is named by the per-entry check."""
-    names = [str(k) for k in uavs if k != me]
-    values = [v for k, v in uavs.items() if k != me]
+    them at every step); a malformed entry is named by the per-entry check. This agent's own entry is checked
+    too (a truth with any malformed position is malformed), then left out."""
+    names = [str(k) for k in uavs]
+    values = list(uavs.values())
     try:
         table = np.array(values, dtype=float).reshape(len(values), 3)
         plain = all(isinstance(v, list | tuple) and all(type(x) in (float, int) for x in v) for v in values)
     except (TypeError, ValueError):
         table, plain = None, False
     if table is None or not plain or not np.isfinite(table).all():
-        return {name: _vector(v, f"uavs.{name}") for name, v in zip(names, values, strict=True)}
-    return dict(zip(names, table, strict=True))
+        checked = {name: _vector(v, f"uavs.{name}") for name, v in zip(names, values, strict=True)}
+    else:
+        checked = dict(zip(names, table, strict=True))
+    checked.pop(me, None)
+    return checked
 
 
 def _target(entry) -> dict:

@@ -165,6 +165,13 @@ BENCHMARKS: dict[str, Benchmark] = {
             "seed (fleet ÷ oracle, CPU per step), and one autopilot frozen: detection and reassignment times",
         ),
         Benchmark(
+            "fuzz",
+            "mesh_sim.bench.fuzz",
+            "issue 16: >= 1e5 fuzzed inputs per message kind (random, truncated, bit-flipped, type-confused, bad "
+            "matrices, huge, nested, wrong origin, replays, far stamps) to the decoder and an agent's receive path: "
+            "crashes, hangs > 50 ms, peak memory, invalid inputs accepted",
+        ),
+        Benchmark(
             "particles",
             "mesh_sim.bench.particles",
             "particle fusion (Merino Alg. 5.2 GMM and Alg. 5.3 LOP) time and accuracy vs particle count 200/500/2000",

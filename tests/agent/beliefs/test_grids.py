@@ -99,9 +99,21 @@ def _message(belief="logodds", **changes):
     ({"grid": {"mode": "key", "layers": b"\x00\x01"}}, None),  # garbage codec payload
 ])
 def test_bad_grid_messages_are_rejected_and_change_nothing(bad, reason):
+    _rejected(bad, reason)
+
+
+@pytest.mark.parametrize("belief", [np.array([1.0, np.nan]), ["logodds"], None])
+def test_a_belief_type_that_is_no_string_is_rejected(belief):
+    """Bad input (skymesh bench fuzz: an array crashed the agent, ValueError from ``array != str``)."""
+    seq, payload = _message()
+    _rejected({**payload, "belief": belief}, "grid_geometry", seq)
+
+
+def _rejected(bad: dict, reason: str | None, seq: int | None = None):
+    """``bad`` (changes to a valid message, or with ``seq`` a whole payload) is rejected and changes nothing."""
     receiver = Node("b", GridConfig(cell=10.0))
     before = receiver.mapper.grid.evidence.copy()
-    seq, payload = _message(**bad)
+    seq, payload = _message(**bad) if seq is None else (seq, bad)
     with pytest.raises(wire.DecodeError) as err:
         receiver.mapper.receive("a", seq, 0.0, payload, True, 0.0)
     if reason is not None:

@@ -254,3 +254,15 @@ def test_increments_older_than_the_horizon_are_forgotten():
     relay.originate(0.0, "x")
     assert relay.due(0.2, ["b"], lambda _: frozenset())
     assert relay.due(1.2, ["b"], lambda _: frozenset()) == [] and relay.metrics()["held"] == 0
+
+
+def test_an_increment_number_far_ahead_is_recorded_without_shifting_the_mask_by_it():
+    """Bad input (skymesh bench fuzz: a flooded increment numbered 2**63 crashed the agent with a MemoryError,
+    the mask shifted left by 2**63 bits). Only the 64 numbers below the highest have bits."""
+    held = Held()
+    for n in (0, 1, 3):
+        held.add(n)
+    assert held.add(2**63) and held.high == 2**63 and held.mask == 0
+    assert held.has(3) and not held.has(2**63 + 1)  # anything older than the span counts as held
+    held.add(2**63 + 64)
+    assert held.mask == 1 << 63  # 2**63, 64 below the new highest: the last bit of the span

@@ -243,3 +243,15 @@ def test_neighbour_timeout():
     assert topo.neighbours(14.0) == ["a2"]  # a2 heard exactly ``timeout`` ago; a1 timed out
     assert topo.neighbours(14.01) == []
     assert Topology(ME).timeout == NEIGHBOUR_TIMEOUT
+
+
+@pytest.mark.parametrize("when", [float("nan"), float("inf"), -float("inf")])
+def test_a_report_time_that_is_not_finite_is_rejected_and_changes_nothing(when):
+    """Bad input (skymesh bench fuzz: a NaN report time was kept; an infinite one would pin a peer's neighbours
+    for ever, no later report being newer)."""
+    topology = Topology("a")
+    topology.receive("b", {"b": (1.0, ["a"])}, 1.0)
+    with pytest.raises(wire.DecodeError) as err:
+        topology.receive("b", {"c": (2.0, ["b"]), "b": (when, ["c"])}, 2.0)
+    assert err.value.reason == "non_finite"
+    assert topology.neighbours_of("b", 2.0) == {"a"} and topology.neighbours_of("c", 2.0) == frozenset()

@@ -410,3 +410,22 @@ def test_fuzz_arbitrary_msgpack_structures_only_raise_decode_error(tree):
 def test_fuzz_envelopes_with_arbitrary_field_values_only_raise_decode_error(fields, keep_valid):
     body = {**_valid_body(), **fields} if keep_valid else fields
     _full_pipeline(pack(body), key=KEY if "mac" in fields else None)
+
+
+def test_a_generic_payload_of_a_hundred_thousand_elements_is_judged_within_a_hang_budget():
+    """Bad input (skymesh bench fuzz): a telemetry payload holding a list of 10**5 ints (100 kB, within the size
+    limit) took 0.5-0.7 s to validate — the agent's 50 ms hang threshold ten times over. Best of 3, < 50 ms."""
+    import time
+
+    for payload, ok in [({"zz": [0] * 100_000}, True), ({"zz": [0] * 99_999 + [msgpack.ExtType(5, b"")]}, False)]:
+        data = msgpack.packb({"v": wire.SCHEMA_VERSION, "k": "telemetry", "o": "uav1", "s": 1, "t": 0.0, "a": {},
+                              "p": payload})
+        times = []
+        for _ in range(3):
+            started = time.perf_counter()
+            try:
+                decode(data)
+            except DecodeError:
+                assert not ok
+            times.append(time.perf_counter() - started)
+        assert min(times) < 0.050, times

@@ -66,6 +66,7 @@ def test_a_malformed_fire_is_rejected_and_the_rest_is_kept():
     ({"targets": [{"id": "car", "position": [True, 0, 0], "velocity": [0, 0, 0]}]}, "a bool coordinate"),
     ({"uavs": [[0, 0, 0]]}, "uavs as a list"),
     ({"uavs": {"uav1": [0, 0, float("inf")]}}, "an infinite UAV position"),
+    ({"uavs": {"uav0": [0, 0, float("inf")], "uav1": [0, 0, 0]}}, "the receiver's own position infinite (bench fuzz)"),
     ({"uavs": {"uav1": "north"}}, "a UAV position as a string"),
     ({"uavs": {"uav1": ["1", "2", "3"]}}, "coordinates as strings of digits"),
     ({"uavs": {"uav1": [1.0, 2.0, True]}}, "a bool coordinate of a UAV"),
