@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from agent.agent import Agent
+from agent.beliefs.tracking import Track
 from agent.config import AgentScenario
 from agent.net import wire
 from agent.net.bus import InMemoryBus
@@ -102,12 +103,14 @@ def test_a_peer_that_restarts_gets_fresh_channels_and_its_new_life_is_heard():
 
 
 def test_a_restart_under_flood_changes_nothing_but_the_labels():
-    """Flood (the default policy) keeps no channel filters: a restarted peer only loses its track labels."""
+    """Flood (the default policy) keeps no channel filters (a track's ``channels`` is None): a restarted peer only
+    loses its track labels, and the tracks stay as they were (a live restart crashed here before)."""
     keys = Keys(f"inc-{uuid.uuid4().hex[:8]}")
     scenario = AgentScenario(agents=2, tracking=replace(AgentScenario().tracking, policy="flood"))
     uav0 = Agent("uav0", 0, scenario, InMemoryBus().endpoint("uav0", []), keys, seed=0)
     tracker = uav0.exchanges["track"].tracker
+    tracker.tracks[7] = Track(7, Trajectory.prior(tracker.model, 0), None, 0)
     tracker.labels[("uav1", 3)] = 7
-    tracker.labels[("uav2", 3)] = 8
+    tracker.labels[("uav2", 3)] = 7
     uav0.exchanges["track"].peer_restarted("uav1")
-    assert tracker.labels == {("uav2", 3): 8}
+    assert tracker.labels == {("uav2", 3): 7} and list(tracker.tracks) == [7]
