@@ -201,9 +201,10 @@ def test_setpoints_stream_at_10_hz_a_reference_moving_at_the_speed_limit_in_the_
     goal = np.array([150.0, -60.0, -20.0])  # scenario NED, 36 m away
     vehicle.set_setpoint(Setpoint(goal, speed=4.0))
     time.sleep(0.3)
-    since = time.monotonic()
+    since, followed_from = time.monotonic(), vehicle.state().position
     time.sleep(2.0)
     window = streamed(peer, since)
+    followed = np.linalg.norm(vehicle.state().position - followed_from) / (time.monotonic() - since)
     assert len(window) / 2.0 >= 9.0  # configured 10 Hz; >= 5 Hz is the requirement
     for msg in window:
         assert msg.coordinate_frame == mavlink.MAV_FRAME_LOCAL_NED
@@ -219,7 +220,7 @@ def test_setpoints_stream_at_10_hz_a_reference_moving_at_the_speed_limit_in_the_
         assert np.linalg.norm(along - (along @ line) * line) < 0.05
     first, last = (local_to_scenario([m.x, m.y, m.z]) for m in (window[0], window[-1]))
     assert np.linalg.norm(last - first) / (len(window) - 1) == pytest.approx(0.4, rel=0.1)  # 4 m/s at 10 Hz
-    assert np.linalg.norm(vehicle.state().velocity) == pytest.approx(4.0, abs=0.6)  # and the vehicle follows
+    assert followed == pytest.approx(4.0, abs=0.6)  # and the vehicle follows: its mean speed over the 2 s window
     assert np.linalg.norm(vehicle.state().position - vehicle.reference.position) < 2.0
 
 
