@@ -20,8 +20,11 @@ import resource
 import signal
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 
@@ -136,12 +139,29 @@ def run_steps(step_fn, clock: SimClock, dt: float, duration: float, stop: thread
     return stats
 
 
-def write_json(path: str | Path, data: dict) -> None:
-    """Write atomically (temporary file + rename), so a reader never sees half a file."""
+@contextmanager
+def atomic_file(path: str | Path, mode: str = "w") -> Iterator[IO]:
+    """Open a temporary file beside ``path`` for writing; when the block ends cleanly it replaces ``path``
+    (``os.replace``, atomic on one file system), and when it raises (a full disk, a write that failed) the
+    temporary file is removed and ``path`` is left as it was. So a reader never sees half a file, and a failed
+    write leaves nothing half-written behind. An ``OSError`` names ``path`` (a failed ``write`` alone would not)."""
     path = Path(path)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=_plain))
-    os.replace(tmp, path)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with open(tmp, mode) as f:
+            yield f
+        os.replace(tmp, path)
+    except BaseException as err:
+        tmp.unlink(missing_ok=True)
+        if isinstance(err, OSError) and err.errno is not None and err.filename is None:
+            raise OSError(err.errno, err.strerror, str(path)) from err
+        raise
+
+
+def write_json(path: str | Path, data: dict) -> None:
+    """Write ``data`` as JSON atomically (:func:`atomic_file`), so a reader never sees half a file."""
+    with atomic_file(path) as f:
+        f.write(json.dumps(data, indent=2, default=_plain))
 
 
 def _plain(value):
