@@ -18,6 +18,7 @@ import math
 import os
 import resource
 import signal
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -29,6 +30,20 @@ from typing import IO
 import numpy as np
 
 log = logging.getLogger("skymesh.runtime")
+
+EXIT_USAGE = 2  # a bad setting or a bad environment (unwritable folder, full disk, no router): nothing was done
+
+
+def usage_error(prog: str, err: Exception | str) -> int:
+    """Say ``prog: what went wrong`` as one line on stderr (no traceback) and return :data:`EXIT_USAGE`: the one
+    way every skymesh command and process reports a bad setting or a bad environment. An ``OSError`` reads
+    ``FILE: reason`` (Python's ``[Errno N]`` prefix is noise to a user)."""
+    if isinstance(err, OSError) and err.strerror:
+        text = f"{err.filename}: {err.strerror}" if err.filename else err.strerror
+    else:
+        text = str(err)
+    print(f"{prog}: {text}", file=sys.stderr)
+    return EXIT_USAGE
 
 
 @dataclass(frozen=True)

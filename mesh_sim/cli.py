@@ -35,12 +35,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from agent.beliefs.tracking_config import POLICIES
+from agent.runtime import EXIT_USAGE, usage_error
 from agent.sensors.registry import SENSORS
 from mesh_sim.autopilot.options import add_arguments as add_autopilot_arguments
 from mesh_sim.bench import BENCHMARKS
 from mesh_sim.bench.common import make_console, write_json
 
-EXIT_USAGE = 2
 STOPPED_BY = {"interrupted": 130, "terminated": 143}  # a run stopped by SIGINT / SIGTERM: 128 + the signal
 #: benchmark options beyond --quick and --json, for the benchmarks naming them
 BENCH_OPTIONS = ("sizes", "sensor", "seeds")
@@ -210,8 +210,7 @@ def _run(args) -> int:
                                    cameras=cameras, vehicle=args.vehicle, restart=args.restart).run()
                 metrics, status = outcome.metrics, outcome.status
     except (ValueError, OSError) as err:
-        print(f"skymesh run: {err}", file=sys.stderr)
-        return EXIT_USAGE
+        return usage_error("skymesh run", err)
     console.print(summary_table(metrics))
     if (fire_map := grid_table(metrics)) is not None:
         console.print(fire_map)
@@ -268,8 +267,7 @@ def _compare(args) -> int:
         found = (compare_tree(args.before, args.after, args.rtol) if args.tree
                  else compare(args.before, args.after, args.rtol))
     except (RunFolderError, OSError, ValueError) as err:
-        print(f"skymesh compare: {err}", file=sys.stderr)
-        return EXIT_USAGE
+        return usage_error("skymesh compare", err)
     console = make_console()
 
     def show(differences, title: str, indent: str = "") -> None:

@@ -127,9 +127,14 @@ def free_port() -> int:
 
 
 def new_run_dir(base: Path, name: str) -> Path:
+    """A new, empty folder ``base/NAME-STAMP-XXXX`` (``base`` created if need be). Raises ``OSError`` naming
+    ``base`` — the folder the user gave — when it cannot be made (read-only, full, a file in the way)."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     path = base / f"{name}-{stamp}-{uuid.uuid4().hex[:4]}"
-    path.mkdir(parents=True)
+    try:
+        path.mkdir(parents=True)
+    except OSError as err:
+        raise OSError(err.errno, f"cannot create a run folder here: {err.strerror}", str(base)) from None
     return path
 
 
