@@ -31,7 +31,7 @@ import threading
 import time
 import uuid
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,13 +40,14 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from agent.net.fleet_key import new_key_file
-from agent.net.zenoh_transport import router_config
+from agent.net.zenoh_transport import SessionError, open_session, router_config
 from agent.runtime import atomic_file, write_json
 from mesh_sim import results
 from mesh_sim.scenario import Scenario
 
 START_DELAY_S = 0.5  # wall seconds between "everyone is ready" and simulation time 0; chosen here
 READY_TIMEOUT_S = 120.0  # a process that is not ready by then fails the run
+ROUTER_ATTEMPTS = 3  # free ports tried for the router when one is taken before it listens (a race; chosen here)
 GRACE_S = 10.0  # wall seconds between SIGTERM and SIGKILL
 VEHICLES = ("kinematic", "mavlink")  # each agent's own kinematic model, or an autopilot simulator over MAVLink
 
@@ -126,6 +127,21 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def open_router(attempts: int = ROUTER_ATTEMPTS) -> tuple[zenoh.Session, str]:
+    """The run's Zenoh router on a free loopback port, and its endpoint. A port is free when :func:`free_port`
+    looks, but another process may take it before the router listens: then another port is tried, and after
+    ``attempts`` the last one's :class:`SessionError` (a one-line ``OSError``) is raised."""
+
+    def on_a_free_port() -> tuple[zenoh.Session, str]:
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        return open_session(router_config([endpoint])), endpoint
+
+    for _ in range(attempts - 1):
+        with suppress(SessionError):
+            return on_a_free_port()
+    return on_a_free_port()
+
+
 def new_run_dir(base: Path, name: str) -> Path:
     """A new, empty folder ``base/NAME-STAMP-XXXX`` (``base`` created if need be). Raises ``OSError`` naming
     ``base`` — the folder the user gave — when it cannot be made (read-only, full, a file in the way)."""
@@ -194,8 +210,7 @@ class Launcher:
         scenario_file = self.run_dir / "scenario.json"
         write_json(scenario_file, self.scenario.raw)
         (self.run_dir / "logs").mkdir(exist_ok=True)
-        endpoint = f"tcp/127.0.0.1:{free_port()}"
-        router = zenoh.open(router_config([endpoint]))
+        router, endpoint = open_router()
         status = "completed"
         try:
             with _sigterm_raises():

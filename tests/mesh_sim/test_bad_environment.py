@@ -7,13 +7,22 @@ The folder tests mount small tmpfs file systems (read-only, or full): they need 
 
 from __future__ import annotations
 
+import json
+import socket
 import subprocess
+import sys
+import time
+import uuid
 from pathlib import Path
 
 import pytest
 
+from agent.__main__ import main as agent_main
 from agent.runtime import atomic_file
-from mesh_sim import cli
+from mesh_sim import cli, launcher
+from mesh_sim.launcher import free_port, open_router
+from mesh_sim.scenario import load
+from mesh_sim.world import main as world_main
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -39,6 +48,15 @@ def tmpfs(tmp_path):
     finally:
         for path in mounted:
             subprocess.run(["umount", str(path)], check=True)
+
+
+@pytest.fixture
+def taken_port():
+    """A loopback TCP port that a listening socket holds for the test."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        yield s.getsockname()[1]
 
 
 def _one_line(err: str) -> str:
@@ -103,3 +121,82 @@ def test_a_full_disk_is_one_line_and_leaves_no_half_written_run(tmpfs, capsys):
     assert code == 2
     assert line.startswith(f"skymesh run: {out}/default-") and line.endswith("/metrics.json: No space left on device")
     assert list(out.iterdir()) == []
+
+
+# -- Zenoh: ports and routers ----------------------------------------------------------------------------------
+def test_the_launchers_router_tries_another_port_when_its_port_was_taken(monkeypatch, taken_port):
+    """Bad input: the port the launcher picked is taken before its router listens (a race, forced here)."""
+    ports = iter([taken_port, free_port()])
+    monkeypatch.setattr(launcher, "free_port", lambda: next(ports))
+    router, endpoint = open_router()
+    router.close()
+    assert endpoint != f"tcp/127.0.0.1:{taken_port}"
+
+
+def test_a_router_that_cannot_listen_is_one_line_exit_2_and_no_folder(tmp_path, capsys, monkeypatch, taken_port):
+    """Bad input: every port the launcher picks for its router is taken (``skymesh run``, live)."""
+    monkeypatch.setattr(launcher, "free_port", lambda: taken_port)
+    code = cli.main(["run", "--duration", "1", "--rerun", "off", "--out", str(tmp_path / "runs")])
+    line = _one_line(capsys.readouterr().err)
+    assert code == 2 and line.startswith("skymesh run: cannot open the Zenoh session (Can not create a new TCP "
+                                         f"listener bound to tcp/127.0.0.1:{taken_port}")
+    assert "Address already in use" in line and list((tmp_path / "runs").iterdir()) == []
+
+
+def _scenario_file(tmp_path: Path) -> str:
+    path = tmp_path / "scenario.json"
+    path.write_text(json.dumps(load("default").raw))
+    return str(path)
+
+
+def test_an_agent_listening_on_a_taken_port_is_one_line_exit_2(tmp_path, capsys, taken_port):
+    """Bad input: ``python -m agent --zenoh-config FILE`` whose ``listen`` endpoint is a port in use."""
+    config = tmp_path / "zenoh.json5"
+    config.write_text(json.dumps({"mode": "peer", "listen": {"endpoints": [f"tcp/127.0.0.1:{taken_port}"]},
+                                  "scouting": {"multicast": {"enabled": False}}}))
+    code = agent_main(["--id", "uav0", "--index", "0", "--fleet", "f", "--scenario", _scenario_file(tmp_path),
+                       "--zenoh-config", str(config), "--out", str(tmp_path)])
+    line = _one_line(capsys.readouterr().err)
+    assert code == 2 and line.startswith("agent uav0: cannot open the Zenoh session") and "in use" in line
+
+
+@pytest.mark.parametrize("index", [4, -1])
+def test_an_agent_index_outside_the_team_is_one_line_exit_2(tmp_path, capsys, index):
+    """Bad input: ``python -m agent --index 4`` (and -1) for the default scenario's 4 agents."""
+    code = agent_main(["--id", "uav0", "--index", str(index), "--fleet", "f", "--scenario", _scenario_file(tmp_path),
+                       "--connect", f"tcp/127.0.0.1:{free_port()}", "--out", str(tmp_path)])
+    assert code == 2
+    assert _one_line(capsys.readouterr().err) == \
+        f"agent uav0: --index {index} is not an agent of this scenario: it has 4 (0..3)"
+
+
+@pytest.mark.slow  # each waits for Zenoh to give up on the endpoint (about a second)
+@pytest.mark.parametrize("prog", ["agent", "world"])
+def test_a_process_whose_router_is_dead_is_one_line_exit_2(tmp_path, capsys, prog):
+    """Bad input: ``--connect tcp/127.0.0.1:PORT`` where nothing listens (agent and world, in this process)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    common = ["--fleet", "f", "--scenario", _scenario_file(tmp_path), "--connect", endpoint, "--out", str(tmp_path)]
+    started = time.monotonic()
+    code = (agent_main(["--id", "uav0", "--index", "0", *common]) if prog == "agent"
+            else world_main([*common, "--duration", "1"]))
+    line = _one_line(capsys.readouterr().err)
+    assert code == 2 and time.monotonic() - started < 10
+    name = "agent uav0" if prog == "agent" else "world"
+    assert line == f"{name}: the Zenoh router could not be reached (Unable to connect to any of [Single({endpoint})]!)"
+    assert list(tmp_path.iterdir()) == [tmp_path / "scenario.json"]
+
+
+@pytest.mark.slow  # processes that wait for Zenoh to give up on the endpoint
+@pytest.mark.parametrize("command", [["mesh_sim.observer"], ["mesh_sim.cli", "view"]])
+def test_an_observer_whose_router_is_dead_is_one_line_exit_2_and_writes_no_recording(tmp_path, command):
+    """Bad input: ``python -m mesh_sim.observer`` / ``skymesh view`` ``--connect tcp/127.0.0.1:PORT`` where nothing
+    listens, saving to x.rrd: no recording file is created."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    proc = subprocess.run([sys.executable, "-m", *command, "--fleet", f"t{uuid.uuid4().hex[:12]}", "--connect",
+                           endpoint, "--save", str(tmp_path / "x.rrd"), "--duration", "5"],
+                          cwd=REPO, capture_output=True, text=True, timeout=60, check=False)
+    assert proc.returncode == 2
+    assert _one_line(proc.stderr) == ("observer: the Zenoh router could not be reached "
+                                      f"(Unable to connect to any of [Single({endpoint})]!)")
+    assert not (tmp_path / "x.rrd").exists()
+
