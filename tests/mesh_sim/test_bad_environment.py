@@ -123,6 +123,22 @@ def test_a_full_disk_is_one_line_and_leaves_no_half_written_run(tmpfs, capsys):
     assert list(out.iterdir()) == []
 
 
+# -- a camera --------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("source, why", [
+    ("does-not-exist.avi", "no such file"),
+    ("junk.avi", "not a video file OpenCV can read"),
+    (".", "a folder, not a video file"),
+])
+def test_a_camera_that_is_not_a_video_is_one_line_naming_it_and_no_run_starts(tmp_path, capsys, monkeypatch,
+                                                                              source, why):
+    """Bad input: ``--camera uav0=SOURCE`` for a missing file, a file of random bytes, a folder."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "junk.avi").write_bytes(bytes(range(256)) * 20)
+    code, line = _run(capsys, tmp_path / "runs", "--camera", f"uav0={source}")
+    assert code == 2 and line == f"skymesh run: --camera uav0: cannot open camera source {source!r} ({why})"
+    assert not (tmp_path / "runs").exists()
+
+
 # -- Zenoh: ports and routers ----------------------------------------------------------------------------------
 def test_the_launchers_router_tries_another_port_when_its_port_was_taken(monkeypatch, taken_port):
     """Bad input: the port the launcher picked is taken before its router listens (a race, forced here)."""
