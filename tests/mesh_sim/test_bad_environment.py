@@ -20,6 +20,7 @@ import pytest
 from agent.__main__ import main as agent_main
 from agent.runtime import atomic_file
 from mesh_sim import cli, launcher
+from mesh_sim.autopilot.process import free_udp_ports
 from mesh_sim.launcher import free_port, open_router
 from mesh_sim.scenario import load
 from mesh_sim.world import main as world_main
@@ -216,3 +217,18 @@ def test_an_observer_whose_router_is_dead_is_one_line_exit_2_and_writes_no_recor
                                       f"(Unable to connect to any of [Single({endpoint})]!)")
     assert not (tmp_path / "x.rrd").exists()
 
+
+@pytest.mark.slow  # a process
+def test_an_autopilot_whose_port_is_taken_is_one_line_on_stderr_naming_it():
+    """Bad input: ``skymesh autopilot --offboard-port P`` where a UDP socket holds P. The line goes to stderr (its
+    stdout carries JSON lines) and names the ports."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as held:
+        held.bind(("127.0.0.1", 0))
+        port = held.getsockname()[1]
+        (gcs,) = free_udp_ports(1)
+        proc = subprocess.run([sys.executable, "-m", "mesh_sim.cli", "autopilot", "--instance", "0", "--offboard-port",
+                               str(port), "--gcs-port", str(gcs), "--duration", "1"],
+                              cwd=REPO, capture_output=True, text=True, timeout=60, check=False)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert _one_line(proc.stderr) == (f"skymesh autopilot: cannot bind its UDP ports 127.0.0.1:{port}, "
+                                      f"127.0.0.1:{gcs}: Address already in use")
