@@ -12,7 +12,8 @@ code 2) before the agent's loop starts.
 
 ``--camera SOURCE`` replaces the synthetic camera with an OpenCV video source (a file path, a device
 index such as ``0``, a stream URL): one frame is read per agent step, the pose comes from the vehicle as
-usual. A source that cannot be opened is an error at start (exit code 2).
+usual. A source that cannot be opened is an error at start (exit code 2), and so are a Zenoh router that cannot be
+reached and an ``--index`` outside the scenario's team.
 
 The process imports only what its scenario uses (issue 12): OpenCV comes with a camera (the ``camera``
 sensor, ``--camera``, or a ``[grid]``'s thermal camera), never with the geometric bearing sensor; neither

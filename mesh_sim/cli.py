@@ -24,7 +24,9 @@
   to 14550 (ground station), until SIGTERM / SIGINT, ``--duration`` or the death of ``--parent-pid``.
 
 Exit codes: 0 success, 1 a run that failed (a child died) or runs that differ, 2 usage error (unknown
-benchmark or scenario, bad settings, not a run folder), 130 interrupted.
+benchmark or scenario, bad settings, not a run folder) or a bad environment (an output folder that cannot be
+written, a full disk, a camera that does not open, a port in use, no router): one line on stderr
+(:func:`agent.runtime.usage_error`), 130 interrupted.
 """
 
 from __future__ import annotations
