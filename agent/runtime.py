@@ -22,7 +22,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
@@ -159,7 +159,8 @@ def atomic_file(path: str | Path, mode: str = "w") -> Iterator[IO]:
     """Open a temporary file beside ``path`` for writing; when the block ends cleanly it replaces ``path``
     (``os.replace``, atomic on one file system), and when it raises (a full disk, a write that failed) the
     temporary file is removed and ``path`` is left as it was. So a reader never sees half a file, and a failed
-    write leaves nothing half-written behind. An ``OSError`` names ``path`` (a failed ``write`` alone would not)."""
+    write leaves nothing half-written behind. An ``OSError`` of the writing names ``path`` (a failed ``write`` alone
+    would name nothing, a failed ``open`` the temporary file)."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     try:
@@ -167,8 +168,9 @@ def atomic_file(path: str | Path, mode: str = "w") -> Iterator[IO]:
             yield f
         os.replace(tmp, path)
     except BaseException as err:
-        tmp.unlink(missing_ok=True)
-        if isinstance(err, OSError) and err.errno is not None and err.filename is None:
+        with suppress(OSError):  # never created (a read-only folder), or gone already
+            tmp.unlink()
+        if isinstance(err, OSError) and err.errno is not None and err.filename in (None, str(tmp)):
             raise OSError(err.errno, err.strerror, str(path)) from err
         raise
 

@@ -177,7 +177,10 @@ def _bench(args) -> int:
     result = bench.run(quick=args.quick, repeats=args.repeats, **options)
     bench.report(result, console)
     if args.json is not None:
-        console.print(f"JSON written to {write_json(args.json, result)}", highlight=False)
+        try:
+            console.print(f"JSON written to {write_json(args.json, result)}", highlight=False)
+        except OSError as err:  # the tables are printed; the file is not half-written (atomic)
+            return usage_error(f"skymesh bench {args.name}", err)
     return 0
 
 

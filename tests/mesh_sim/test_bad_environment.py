@@ -96,6 +96,15 @@ def test_atomic_file_on_a_full_disk_names_the_file_and_leaves_nothing(tmpfs):
     assert list(disk.iterdir()) == []
 
 
+def test_atomic_file_in_a_read_only_folder_names_the_file(tmpfs):
+    """Bad input: a result file in a read-only tmpfs (the temporary file cannot even be created)."""
+    folder = tmpfs("ro", "ro,size=16k")
+    with pytest.raises(OSError) as caught, atomic_file(folder / "metrics.json") as f:
+        f.write("{}")
+    assert caught.value.filename == str(folder / "metrics.json") and caught.value.strerror == "Read-only file system"
+
+
+
 # -- the output folder -----------------------------------------------------------------------------------------
 def test_a_read_only_output_folder_is_one_line_naming_it(tmpfs, capsys):
     """Bad input: ``--out`` inside a read-only tmpfs."""
@@ -122,6 +131,17 @@ def test_a_full_disk_is_one_line_and_leaves_no_half_written_run(tmpfs, capsys):
     assert code == 2
     assert line.startswith(f"skymesh run: {out}/default-") and line.endswith("/metrics.json: No space left on device")
     assert list(out.iterdir()) == []
+
+
+def test_a_benchmark_json_that_cannot_be_written_is_one_line_exit_2(tmpfs, capsys, monkeypatch):
+    """Bad input: ``skymesh bench fire --json RO/fire.json`` in a read-only tmpfs (the benchmark itself faked)."""
+    from mesh_sim.bench import fire
+
+    monkeypatch.setattr(fire, "run", lambda **kwargs: {"benchmark": "fire", "rows": []})
+    monkeypatch.setattr(fire, "report", lambda result, console=None: None)
+    path = tmpfs("ro", "ro,size=16k") / "fire.json"
+    assert cli.main(["bench", "fire", "--json", str(path)]) == 2
+    assert _one_line(capsys.readouterr().err) == f"skymesh bench fire: {path}: Read-only file system"
 
 
 # -- a camera --------------------------------------------------------------------------------------------------
@@ -232,3 +252,4 @@ def test_an_autopilot_whose_port_is_taken_is_one_line_on_stderr_naming_it():
     assert proc.returncode == 2 and proc.stdout == ""
     assert _one_line(proc.stderr) == (f"skymesh autopilot: cannot bind its UDP ports 127.0.0.1:{port}, "
                                       f"127.0.0.1:{gcs}: Address already in use")
+
