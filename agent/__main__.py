@@ -12,7 +12,8 @@ code 2) before the agent's loop starts.
 
 ``--camera SOURCE`` replaces the synthetic camera with an OpenCV video source (a file path, a device
 index such as ``0``, a stream URL): one frame is read per agent step, the pose comes from the vehicle as
-usual. A source that cannot be opened is an error at start (exit code 2).
+usual. A source that cannot be opened is an error at start (exit code 2), and so are a Zenoh router that cannot be
+reached and an ``--index`` outside the scenario's team.
 
 The process imports only what its scenario uses (issue 12): OpenCV comes with a camera (the ``camera``
 sensor, ``--camera``, or a ``[grid]``'s thermal camera), never with the geometric bearing sensor; neither
@@ -45,6 +46,7 @@ from agent.runtime import (
     install_stop_handlers,
     run_steps,
     staggered_phase,
+    usage_error,
     wait_for_epoch,
     write_json,
 )
@@ -92,6 +94,13 @@ def with_mavlink(vehicle: dict, url: str) -> dict:
     return {"kind": "mavlink", "url": url, **{key: value for key, value in carried.items() if value is not None}}
 
 
+def _check_index(index: int, agents: int) -> None:
+    """``--index`` must name one of the scenario's agents: another index would fly a start position and a
+    stagger phase that no agent of the team has (silently, as a duplicate of ``index % agents``)."""
+    if not 0 <= index < agents:
+        raise ValueError(f"--index {index} is not an agent of this scenario: it has {agents} (0..{agents - 1})")
+
+
 def _open_camera(source: str):
     """The external video source of ``--camera`` (OpenCV is imported only then)."""
     from agent.sensors.video_source import VideoSource
@@ -106,23 +115,21 @@ def main(argv=None) -> int:
         scenario = AgentScenario.from_dict(read_scenario_file(args.scenario))
         if args.mavlink is not None:
             scenario = replace(scenario, vehicle=with_mavlink(scenario.vehicle, args.mavlink))
+        _check_index(args.index, scenario.agents)
         key = read_key_file(args.fleet_key_file) if args.fleet_key_file else None
         keys = Keys(args.fleet)
         config = load_config(args.connect, args.zenoh_config)
         camera = _open_camera(args.camera) if args.camera is not None else None
+        transport = ZenohTransport(args.id, keys, config, keys.agent_subscriptions())  # SessionError: no router
     except (OSError, ValueError) as err:
-        print(f"agent {args.id}: {err}", file=sys.stderr)
-        return 2
+        return usage_error(f"agent {args.id}", err)
     duration = args.duration if args.duration is not None else scenario.duration
-    subscribe = keys.agent_subscriptions()
-    transport = ZenohTransport(args.id, keys, config, subscribe)
     try:
         agent = Agent(args.id, args.index, scenario, transport, keys, seed=args.seed, fleet_key=key, camera=camera,
                       incarnation=args.incarnation)
     except (VehicleError, ValueError) as err:  # a vehicle that cannot fly: nothing has run yet
         transport.close()
-        print(f"agent {args.id}: {err}", file=sys.stderr)
-        return 2
+        return usage_error(f"agent {args.id}", err)
     stop = threading.Event()
     install_stop_handlers(stop)
     epoch = args.epoch if args.epoch is not None else time.time()

@@ -18,14 +18,32 @@ import math
 import os
 import resource
 import signal
+import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 
 log = logging.getLogger("skymesh.runtime")
+
+EXIT_USAGE = 2  # a bad setting or a bad environment (unwritable folder, full disk, no router): nothing was done
+
+
+def usage_error(prog: str, err: Exception | str) -> int:
+    """Say ``prog: what went wrong`` as one line on stderr (no traceback) and return :data:`EXIT_USAGE`: the one
+    way every skymesh command and process reports a bad setting or a bad environment. An ``OSError`` reads
+    ``FILE: reason`` (Python's ``[Errno N]`` prefix is noise to a user)."""
+    if isinstance(err, OSError) and err.strerror:
+        text = f"{err.filename}: {err.strerror}" if err.filename else err.strerror
+    else:
+        text = str(err)
+    print(f"{prog}: {text}", file=sys.stderr)
+    return EXIT_USAGE
 
 
 @dataclass(frozen=True)
@@ -136,12 +154,31 @@ def run_steps(step_fn, clock: SimClock, dt: float, duration: float, stop: thread
     return stats
 
 
-def write_json(path: str | Path, data: dict) -> None:
-    """Write atomically (temporary file + rename), so a reader never sees half a file."""
+@contextmanager
+def atomic_file(path: str | Path, mode: str = "w") -> Iterator[IO]:
+    """Open a temporary file beside ``path`` for writing; when the block ends cleanly it replaces ``path``
+    (``os.replace``, atomic on one file system), and when it raises (a full disk, a write that failed) the
+    temporary file is removed and ``path`` is left as it was. So a reader never sees half a file, and a failed
+    write leaves nothing half-written behind. An ``OSError`` of the writing names ``path`` (a failed ``write`` alone
+    would name nothing, a failed ``open`` the temporary file)."""
     path = Path(path)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=_plain))
-    os.replace(tmp, path)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with open(tmp, mode) as f:
+            yield f
+        os.replace(tmp, path)
+    except BaseException as err:
+        with suppress(OSError):  # never created (a read-only folder), or gone already
+            tmp.unlink()
+        if isinstance(err, OSError) and err.errno is not None and err.filename in (None, str(tmp)):
+            raise OSError(err.errno, err.strerror, str(path)) from err
+        raise
+
+
+def write_json(path: str | Path, data: dict) -> None:
+    """Write ``data`` as JSON atomically (:func:`atomic_file`), so a reader never sees half a file."""
+    with atomic_file(path) as f:
+        f.write(json.dumps(data, indent=2, default=_plain))
 
 
 def _plain(value):

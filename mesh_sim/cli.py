@@ -24,7 +24,9 @@
   to 14550 (ground station), until SIGTERM / SIGINT, ``--duration`` or the death of ``--parent-pid``.
 
 Exit codes: 0 success, 1 a run that failed (a child died) or runs that differ, 2 usage error (unknown
-benchmark or scenario, bad settings, not a run folder), 130 interrupted.
+benchmark or scenario, bad settings, not a run folder) or a bad environment (an output folder that cannot be
+written, a full disk, a camera that does not open, a port in use, no router): one line on stderr
+(:func:`agent.runtime.usage_error`), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -35,12 +37,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from agent.beliefs.tracking_config import POLICIES
+from agent.runtime import EXIT_USAGE, usage_error
 from agent.sensors.registry import SENSORS
 from mesh_sim.autopilot.options import add_arguments as add_autopilot_arguments
 from mesh_sim.bench import BENCHMARKS
 from mesh_sim.bench.common import make_console, write_json
 
-EXIT_USAGE = 2
 STOPPED_BY = {"interrupted": 130, "terminated": 143}  # a run stopped by SIGINT / SIGTERM: 128 + the signal
 #: benchmark options beyond --quick and --json, for the benchmarks naming them
 BENCH_OPTIONS = ("sizes", "sensor", "seeds")
@@ -175,7 +177,10 @@ def _bench(args) -> int:
     result = bench.run(quick=args.quick, repeats=args.repeats, **options)
     bench.report(result, console)
     if args.json is not None:
-        console.print(f"JSON written to {write_json(args.json, result)}", highlight=False)
+        try:
+            console.print(f"JSON written to {write_json(args.json, result)}", highlight=False)
+        except OSError as err:  # the tables are printed; the file is not half-written (atomic)
+            return usage_error(f"skymesh bench {args.name}", err)
     return 0
 
 
@@ -210,8 +215,7 @@ def _run(args) -> int:
                                    cameras=cameras, vehicle=args.vehicle, restart=args.restart).run()
                 metrics, status = outcome.metrics, outcome.status
     except (ValueError, OSError) as err:
-        print(f"skymesh run: {err}", file=sys.stderr)
-        return EXIT_USAGE
+        return usage_error("skymesh run", err)
     console.print(summary_table(metrics))
     if (fire_map := grid_table(metrics)) is not None:
         console.print(fire_map)
@@ -268,8 +272,7 @@ def _compare(args) -> int:
         found = (compare_tree(args.before, args.after, args.rtol) if args.tree
                  else compare(args.before, args.after, args.rtol))
     except (RunFolderError, OSError, ValueError) as err:
-        print(f"skymesh compare: {err}", file=sys.stderr)
-        return EXIT_USAGE
+        return usage_error("skymesh compare", err)
     console = make_console()
 
     def show(differences, title: str, indent: str = "") -> None:

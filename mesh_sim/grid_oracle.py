@@ -19,6 +19,7 @@ import numpy as np
 from agent.beliefs.grid_config import GridConfig
 from agent.beliefs.grid_exchange import GridReceiver
 from agent.net import wire
+from agent.runtime import atomic_file
 from mesh_sim.fire_scoring import roc
 from mesh_sim.fire_windows import FireWindows
 
@@ -90,7 +91,8 @@ class GridOracle:
         arrays.update({f"agent_{agent}": grid.probability() for agent, grid in self.agents.items()})
         if truth is not None:
             arrays["truth"], arrays["truth_extent"] = truth, np.array(truth_extent)
-        np.savez_compressed(path, **arrays)
+        with atomic_file(path, "wb") as f:
+            np.savez_compressed(f, **arrays)
 
     def _maps(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Cell probabilities of the centralized map and of each agent's."""

@@ -21,7 +21,6 @@ metrics, the merged ``metrics.json``, ``recording.rrd`` and ``plots/``.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import signal
@@ -32,7 +31,7 @@ import threading
 import time
 import uuid
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,13 +40,14 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from agent.net.fleet_key import new_key_file
-from agent.net.zenoh_transport import router_config
-from agent.runtime import write_json
+from agent.net.zenoh_transport import SessionError, open_session, router_config
+from agent.runtime import atomic_file, write_json
 from mesh_sim import results
 from mesh_sim.scenario import Scenario
 
 START_DELAY_S = 0.5  # wall seconds between "everyone is ready" and simulation time 0; chosen here
 READY_TIMEOUT_S = 120.0  # a process that is not ready by then fails the run
+ROUTER_ATTEMPTS = 3  # free ports tried for the router when one is taken before it listens (a race; chosen here)
 GRACE_S = 10.0  # wall seconds between SIGTERM and SIGKILL
 VEHICLES = ("kinematic", "mavlink")  # each agent's own kinematic model, or an autopilot simulator over MAVLink
 
@@ -127,10 +127,30 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def open_router(attempts: int = ROUTER_ATTEMPTS) -> tuple[zenoh.Session, str]:
+    """The run's Zenoh router on a free loopback port, and its endpoint. A port is free when :func:`free_port`
+    looks, but another process may take it before the router listens: then another port is tried, and after
+    ``attempts`` the last one's :class:`SessionError` (a one-line ``OSError``) is raised."""
+
+    def on_a_free_port() -> tuple[zenoh.Session, str]:
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        return open_session(router_config([endpoint])), endpoint
+
+    for _ in range(attempts - 1):
+        with suppress(SessionError):
+            return on_a_free_port()
+    return on_a_free_port()
+
+
 def new_run_dir(base: Path, name: str) -> Path:
+    """A new, empty folder ``base/NAME-STAMP-XXXX`` (``base`` created if need be). Raises ``OSError`` naming
+    ``base`` — the folder the user gave — when it cannot be made (read-only, full, a file in the way)."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     path = base / f"{name}-{stamp}-{uuid.uuid4().hex[:4]}"
-    path.mkdir(parents=True)
+    try:
+        path.mkdir(parents=True)
+    except OSError as err:
+        raise OSError(err.errno, f"cannot create a run folder here: {err.strerror}", str(base)) from None
     return path
 
 
@@ -138,7 +158,14 @@ def new_run_dir(base: Path, name: str) -> Path:
 def run_folder(base: Path, name: str) -> Iterator[Path]:
     """A new run folder (:func:`new_run_dir`) that is removed again, with whatever was written to it, when the
     run raises before it could write its metrics (a bad setting found late, a full disk): a failed start leaves
-    no half-written folder behind. A run that ends — completed, failed or interrupted — keeps its folder."""
+    no half-written folder behind. A run that ends — completed, failed or interrupted — keeps its folder.
+
+    What "nothing half-written" means: every result file (``metrics.json``, the per-process JSON, ``scenario.json``,
+    ``fire_maps.npz``, the plots) is written whole or not at all (:func:`agent.runtime.atomic_file`: a temporary
+    file, then a rename), and ``metrics.json`` is written last but the plots; so a folder either holds a complete
+    ``metrics.json`` or is removed here. (Logs and ``recording.rrd`` are streams: a run that ends keeps what they
+    got.) This is simpler than building the folder under a temporary name: the processes of a live run write to
+    its final path from the start, and a user may follow its logs there."""
     path = new_run_dir(base, name)
     try:
         yield path
@@ -181,10 +208,9 @@ class Launcher:
         """Run the team; on completion, on Ctrl-C (status ``interrupted``) and on SIGTERM (``terminated``) the
         children are stopped and the metrics of what ran are written."""
         scenario_file = self.run_dir / "scenario.json"
-        scenario_file.write_text(json.dumps(self.scenario.raw, indent=2))
+        write_json(scenario_file, self.scenario.raw)
         (self.run_dir / "logs").mkdir(exist_ok=True)
-        endpoint = f"tcp/127.0.0.1:{free_port()}"
-        router = zenoh.open(router_config([endpoint]))
+        router, endpoint = open_router()
         status = "completed"
         try:
             with _sigterm_raises():
@@ -225,9 +251,8 @@ class Launcher:
             time.sleep(0.05)
         self.startup_s = {c.name: self._ready_file(c.name).stat().st_mtime - c.started for c in timed}
         epoch = time.time() + START_DELAY_S
-        tmp = self._epoch_file.with_suffix(".tmp")
-        tmp.write_text(repr(epoch))
-        os.replace(tmp, self._epoch_file)
+        with atomic_file(self._epoch_file) as f:
+            f.write(repr(epoch))
         return epoch
 
     def _start_all(self, scenario_file: Path, endpoint: str) -> None:

@@ -50,12 +50,12 @@ from collections.abc import Sequence
 
 import numpy as np
 import rerun as rr
-import zenoh
 
 from agent.net import wire
 from agent.net.fleet_key import read_key_file
 from agent.net.keys import Incoming, Keys
 from agent.net.zenoh_transport import ZenohTransport, load_config
+from agent.runtime import usage_error
 from mesh_sim.observer_geometry import RAY_LENGTH, cov_to_ellipsoid, ray_end
 from mesh_sim.observer_grids import GridImages
 from mesh_sim.observer_messages import parse_telemetry, parse_truth
@@ -266,15 +266,12 @@ def run_observer(fleet: str, connect: list[str] | None, zenoh_config: str | None
     taken as dead when ``os.getppid()`` no longer returns it. Returns the (closed) observer, whose
     counters tell what was accepted and rejected."""
     keys = Keys(fleet)
-    config = load_config(connect, zenoh_config)
+    # the session first: a router that cannot be reached (SessionError) leaves no recording file behind
+    transport = ZenohTransport(
+        "observer", keys, load_config(connect, zenoh_config),
+        subscribe=[keys.telemetry("*"), f"{keys.root}/belief/**", keys.sim("truth")], liveliness=False,
+    )
     observer = Observer(keys, recording_id or fleet, application_id, fleet_key=fleet_key)
-    if save:
-        observer.save(save)
-    if connect_viewer:
-        observer.connect(connect_viewer)
-    if spawn:
-        observer.spawn()
-
     stop = False
 
     def _stop(signum, frame):
@@ -284,12 +281,13 @@ def run_observer(fleet: str, connect: list[str] | None, zenoh_config: str | None
     in_main = threading.current_thread() is threading.main_thread()  # signals can only be caught there
     previous = {s: signal.signal(s, _stop) for s in (signal.SIGTERM, signal.SIGINT)} if in_main else {}
     parent = os.getppid() if parent_pid is None else parent_pid
-    transport = None
     try:
-        transport = ZenohTransport(
-            "observer", keys, config,
-            subscribe=[keys.telemetry("*"), f"{keys.root}/belief/**", keys.sim("truth")], liveliness=False,
-        )
+        if save:
+            observer.save(save)
+        if connect_viewer:
+            observer.connect(connect_viewer)
+        if spawn:
+            observer.spawn()
         deadline = None if duration is None else time.monotonic() + duration
         while not stop:
             for item in transport.drain():
@@ -303,8 +301,7 @@ def run_observer(fleet: str, connect: list[str] | None, zenoh_config: str | None
         for item in transport.drain():
             observer.handle(item)
     finally:
-        if transport is not None:
-            transport.close()
+        transport.close()
         observer.close()
         for s, handler in previous.items():
             signal.signal(s, handler)
@@ -343,12 +340,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                            args.duration, recording_id=args.recording_id, application_id=args.application_id,
                            parent_pid=args.parent_pid,
                            fleet_key=read_key_file(args.fleet_key_file) if args.fleet_key_file else None)
-    except ValueError as err:
-        print(f"observer: {err}", file=sys.stderr)
-        return 2
-    except zenoh.ZError as err:  # e.g. no router at the endpoint
-        print(f"observer: cannot open the Zenoh session: {err}", file=sys.stderr)
-        return 1
+    except (OSError, ValueError) as err:  # OSError: no router at the endpoint (SessionError), an unwritable --save
+        return usage_error("observer", err)
     rejected = ", ".join(f"{r}={n}" for r, n in sorted(obs.rejected.items())) or "none"
     log.info("observer: %d messages logged; rejected: %s%s", obs.accepted, rejected,
              f"; saved {args.save}" if args.save else "")

@@ -18,7 +18,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from agent.runtime import write_json
+from agent.runtime import atomic_file, write_json
 from mesh_sim.phases import caption, run_phases
 
 
@@ -281,7 +281,8 @@ def plot(metrics: dict, folder: Path) -> None:
     ax.set_ylabel("position RMSE [m]")
     ax.legend(fontsize="small", ncols=2)
     fig.tight_layout()
-    fig.savefig(folder / "rmse.png", dpi=100)
+    with atomic_file(folder / "rmse.png", "wb") as f:
+        fig.savefig(f, format="png", dpi=100)
     plt.close(fig)
 
 
@@ -312,5 +313,6 @@ def plot_fire_maps(maps_file: Path, folder: Path) -> None:
     fig.axes[0].set_ylabel("north [m]")
     fig.colorbar(image, ax=fig.axes, shrink=0.8, label="p(fire)")
     folder.mkdir(exist_ok=True)
-    fig.savefig(folder / "fire_maps.png", dpi=90)
+    with atomic_file(folder / "fire_maps.png", "wb") as f:
+        fig.savefig(f, format="png", dpi=90)
     plt.close(fig)

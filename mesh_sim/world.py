@@ -23,7 +23,15 @@ import numpy as np
 from agent.net import wire
 from agent.net.fleet_key import read_key_file
 from agent.net.keys import Keys
-from agent.runtime import LoopStats, SimClock, install_stop_handlers, run_steps, wait_for_epoch, write_json
+from agent.runtime import (
+    LoopStats,
+    SimClock,
+    install_stop_handlers,
+    run_steps,
+    usage_error,
+    wait_for_epoch,
+    write_json,
+)
 from mesh_sim.fire import FireWorld
 from mesh_sim.grid_oracle import GridOracle, grid_extent
 from mesh_sim.oracle import InFlightOracle, Oracle
@@ -189,11 +197,10 @@ def main(argv=None) -> int:
         scenario = load(args.scenario)
         config = load_config(args.connect, args.zenoh_config)
         fleet_key = read_key_file(args.fleet_key_file) if args.fleet_key_file else None
-    except ValueError as err:
-        print(f"world: {err}", file=sys.stderr)
-        return 2
-    keys = Keys(args.fleet)
-    transport = ZenohTransport("world", keys, config, World.subscriptions(keys), liveliness=False)
+        keys = Keys(args.fleet)
+        transport = ZenohTransport("world", keys, config, World.subscriptions(keys), liveliness=False)
+    except (OSError, ValueError) as err:  # OSError: a scenario file that cannot be read, no router (SessionError)
+        return usage_error("world", err)
     world = World(scenario, transport, keys, fleet_key)
     stop = threading.Event()
     install_stop_handlers(stop)

@@ -22,6 +22,7 @@ have been overwritten.
 from __future__ import annotations
 
 import json
+import re
 import threading
 import time
 
@@ -64,6 +65,23 @@ def load_config(connect: list[str] | None, config_file: str | None) -> zenoh.Con
     return client_config(connect)
 
 
+class SessionError(ConnectionError):
+    """Zenoh could not open a session: no router answered at the endpoints, or an endpoint to listen on is taken.
+    An ``OSError`` (a bad environment, like a full disk), whose message is one line for a user."""
+
+
+def open_session(config: zenoh.Config) -> zenoh.Session:
+    """``zenoh.open(config)``, its failure a :class:`SessionError` saying in one line what went wrong (Zenoh's
+    own message, without the Rust source locations it appends)."""
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as err:
+        text = re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(err)).strip()
+        if text.startswith("Unable to connect"):
+            raise SessionError(f"the Zenoh router could not be reached ({text})") from None
+        raise SessionError(f"cannot open the Zenoh session ({text})") from None
+
+
 class ZenohTransport:
     """Publish bytes on keys, queue what arrives on subscribed keys, track who is alive."""
 
@@ -74,7 +92,7 @@ class ZenohTransport:
         zenoh.init_log_from_env_or("error")
         self.name = name
         self.keys = keys
-        self.session = zenoh.open(config)
+        self.session = open_session(config)
         self._lock = threading.Lock()  # the liveliness callback's set
         self.dropped = 0  # drains that pulled a full ring from one subscription (its oldest may have been lost)
         self._limit = queue_limit

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 
@@ -17,7 +19,7 @@ class VideoSource:
         self.capture = cv2.VideoCapture(spec)
         if not self.capture.isOpened():
             self.capture.release()
-            raise ValueError(f"cannot open camera source {self.name!r} (not a readable video file, device or stream)")
+            raise ValueError(f"cannot open camera source {self.name!r} ({_why_not(self.name)})")
         self.size = (int(self.capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self.capture.get(cv2.CAP_PROP_FRAME_HEIGHT)))
 
     def read(self) -> np.ndarray | None:
@@ -33,3 +35,16 @@ class VideoSource:
 
     def close(self) -> None:
         self.capture.release()
+
+
+def _why_not(source: str) -> str:
+    """Why a source did not open, as far as the file system tells: a missing file, a folder, or a file that is
+    no video OpenCV can read (a device index or a stream URL: OpenCV does not say)."""
+    path = Path(source)
+    if source.strip().isdigit() or "://" in source:
+        return "not a video device or stream that could be opened"
+    if not path.exists():
+        return "no such file"
+    if path.is_dir():
+        return "a folder, not a video file"
+    return "not a video file OpenCV can read"

@@ -17,7 +17,7 @@ import selectors
 import threading
 import time
 
-from agent.runtime import parent_alive, write_json
+from agent.runtime import parent_alive, usage_error, write_json
 from agent.vehicles import vehicle_from_config
 from agent.vehicles.mavlink_protocol import mavlink
 from mesh_sim.autopilot.battery import Battery
@@ -150,11 +150,10 @@ def run(options: AutopilotOptions, stop: threading.Event) -> int:
     try:
         simulator = Simulator(options)
     except OSError as error:
-        print(f"skymesh autopilot: cannot bind its ports: {error}", flush=True)
-        return 2
+        ports = ", ".join(f"{host}:{port}" for host, port in (options.offboard_bind, options.gcs_bind))
+        return usage_error("skymesh autopilot", f"cannot bind its UDP ports {ports}: {error.strerror}")
     except ValueError as error:  # a --vehicle-param the model refuses
-        print(f"skymesh autopilot: {error}", flush=True)
-        return 2
+        return usage_error("skymesh autopilot", error)
     try:
         print(json.dumps(simulator.describe()), flush=True)
         simulator.run(stop)

@@ -26,6 +26,8 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from agent.runtime import atomic_file
+
 #: Timing settings of the two modes (chosen here: quick finishes in seconds, full in about a minute).
 QUICK_REPEATS, QUICK_MIN_TIME = 5, 0.004
 FULL_REPEATS, FULL_MIN_TIME = 21, 0.03
@@ -192,7 +194,8 @@ def write_json(path: str | os.PathLike, result: Mapping) -> Path:
     """Write a benchmark result as JSON (creating parent folders); non-finite floats become null."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(_finite(result), indent=2, sort_keys=False) + "\n")
+    with atomic_file(path) as f:
+        f.write(json.dumps(_finite(result), indent=2, sort_keys=False) + "\n")
     return path
 
 

@@ -296,7 +296,7 @@ def test_observer_process_exits_when_its_parent_dies(zenoh_router, tmp_path):
 def test_observer_process_without_a_router_fails_cleanly(tmp_path):
     cmd = _observer_cmd(f"t{uuid.uuid4().hex[:12]}", f"tcp/127.0.0.1:{free_port()}", tmp_path / "x.rrd", 5.0)
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=30, check=False)
-    assert proc.returncode == 1 and "cannot open the Zenoh session" in proc.stderr, proc.stderr
+    assert proc.returncode == 2 and "the Zenoh router could not be reached" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
     proc = subprocess.run([sys.executable, "-m", "mesh_sim.observer", "--fleet", "f", "--connect", "tcp/127.0.0.1:1"],
                           cwd=REPO, capture_output=True, text=True, timeout=30, check=False)
