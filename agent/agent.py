@@ -56,10 +56,11 @@ class Agent:
         plan = scenario.radio_plan
         self.sender = SendScheduler(scenario.sending, None if plan is None else plan.sender_budget(agent_id))
         self.topology = Topology(agent_id)
+        self.fusions = FusionLog(silence_s=2 * scenario.sending.max_silence)
         self.exchanges: dict = {}
         self.views = Views(self.exchanges)  # filled below; exchanges and planner read each other's views through it
         context = ExchangeContext(agent_id, scenario, self.terrain, seed, self.sender, self, self.unused,
-                                  self.topology, self.views, self.vehicle, incarnation)
+                                  self.topology, self.views, self.vehicle, incarnation, fusions=self.fusions)
         built = {kind: build(context) for kind, build in EXCHANGES.items()}
         self.exchanges.update((kind, exchange) for kind, exchange in built.items() if exchange is not None)
         self.extra_sensors = [s for exchange in self.exchanges.values() for s in exchange.sensors()]
@@ -78,7 +79,6 @@ class Agent:
         self.sim_bytes_tx: Counter = Counter()  # kind -> bytes of simulation-only data (for the oracles)
         self.bytes_rx: Counter = Counter()  # (peer, kind) -> bytes
         self.rejected: Counter = Counter()  # reason -> messages
-        self.fusions = FusionLog(silence_s=2 * scenario.sending.max_silence)
         self.telemetry_thinned = self.steps = 0
         self._seq = first_number(incarnation)  # agent.net.incarnation: a restarted agent's numbers are all newer
         self.window = ReceiveWindow()

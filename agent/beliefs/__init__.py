@@ -41,6 +41,7 @@ class ExchangeContext:
     vehicle: object = None  # agent.vehicles.base.Vehicle: where this agent is
     incarnation: int = 0  # this life of the agent (agent.net.incarnation): a restarted agent numbers on from it
     shared: dict = field(default_factory=dict)  # what one builder leaves for a later one ("tracker")
+    fusions: object = None  # agent.fusion_log.FusionLog: fusions an exchange makes outside receive (settle)
 
 
 def _tracks(ctx: ExchangeContext) -> TrackExchange:
@@ -49,7 +50,7 @@ def _tracks(ctx: ExchangeContext) -> TrackExchange:
     if sc.tracking.policy == "flood":
         exchange = FloodExchange(*args, topology=ctx.topology, incarnation=ctx.incarnation)
     else:
-        exchange = TrackExchange(*args)
+        exchange = TrackExchange(*args, topology=ctx.topology, fusions=ctx.fusions)
     ctx.shared["tracker"] = exchange.tracker
     return exchange
 

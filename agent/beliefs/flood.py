@@ -35,9 +35,8 @@ from fusion.resync import Edge
 class FloodExchange(TrackExchange):
     """Tracks of one agent, built from every agent's detections; see the module docstring."""
 
-    def __init__(self, *args, topology, incarnation: int = 0, **kwargs):
+    def __init__(self, *args, incarnation: int = 0, **kwargs):
         super().__init__(*args, **kwargs)
-        self.topology = topology
         model = self.tracker.model
         self.relay = FloodRelay(self.me, self.sender.config.ack_timeout, (model.window - 1) * model.step,
                                 first=first_number(incarnation))
