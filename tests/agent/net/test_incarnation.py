@@ -88,6 +88,9 @@ def test_a_peer_that_restarts_gets_fresh_channels_and_its_new_life_is_heard():
         sender.publish(keys.belief("track", "uav1"), wire.encode(env))
         uav0.step(t)
 
+    report = wire.Envelope(kind="topology", origin="uav1", seq=1, stamp=0.0,
+                           payload={"reports": {"uav1": [0.0, ["uav0"]]}})  # the link is a bridge: fused on arrival
+    sender.publish(keys.topology("uav1"), wire.encode(report))
     send(40, 0.0)
     tracker = uav0.exchanges["track"].tracker
     assert ("uav1", 1) in tracker.labels  # the setting: uav1's track 1 fused
