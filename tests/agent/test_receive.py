@@ -9,6 +9,7 @@ import uuid
 import numpy as np
 
 from agent.agent import Agent
+from agent.beliefs.tracks import EDGE_WAIT_S
 from agent.config import AgentScenario
 from agent.net import wire
 from agent.net.bus import InMemoryBus
@@ -109,4 +110,5 @@ def test_bad_resync_or_fresh_fields_are_rejected_and_change_nothing():
     send(sender, keys.belief("track", "uav1"), "track", "uav1", seq, {"tracks": [
         {"id": 1, "belief": belief, "last_measured": 0.0, "acks": {}, "resync": {"uav0": 0}, "fresh": 2}]})
     agent.step(0.2 * seq)
+    agent.step(0.2 * seq + EDGE_WAIT_S)  # no topology report here: the message waited for the link's place, then fused
     assert len(agent.exchanges["track"].tracker.tracks) == 1
