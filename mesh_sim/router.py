@@ -1,0 +1,80 @@
+"""``skymesh router --config FILE``: the Zenoh router of a deployment across machines (DESIGN.md §5).
+
+On one machine ``skymesh run`` opens its own router on loopback. Across machines the agents, the ground
+station and (in hardware-in-the-loop runs) the simulated world connect to a router that is started from a
+standard Zenoh JSON5 file, typically ``deploy/router.json5``: TLS with mutual authentication, so that a
+process without a certificate signed by the fleet's CA cannot open a session at all, and access control,
+so that an agent may only publish under its own name. This is Eclipse's ``zenohd`` reading the same file,
+without installing it: the ``eclipse-zenoh`` wheel the agents already use, whatever the file's ``mode``
+says, opened in router mode.
+
+The process prints the endpoints it listens on (as configured) and whether mTLS and access control are on,
+then runs until SIGINT or SIGTERM (exit 0). A config file that is missing, unreadable or refused by Zenoh
+(a syntax error, an unknown field, a certificate that cannot be read, a port in use) is one line on stderr
+and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+import threading
+
+import zenoh
+
+from agent.runtime import install_stop_handlers
+
+EXIT_USAGE = 2
+_SOURCE_LOCATION = re.compile(r"\s+at \S+\.rs:\d+\.?")  # zenoh appends the Rust file and line of each error
+
+
+def one_line(err: Exception) -> str:
+    """Zenoh's error text on one line, without the Rust source locations it appends."""
+    return " ".join(_SOURCE_LOCATION.sub("", str(err)).split())
+
+
+def open_router(config_file: str) -> tuple[zenoh.Session, str]:
+    """A router session from ``config_file`` and its :func:`describe` line; ``ValueError`` (one line) if Zenoh
+    refuses the file."""
+    try:
+        config = zenoh.Config.from_file(config_file)
+        config.insert_json5("mode", json.dumps("router"))
+        summary = describe(config)
+        return zenoh.open(config), summary
+    except zenoh.ZError as err:
+        raise ValueError(f"{config_file}: {one_line(err)}") from None
+
+
+def describe(config: zenoh.Config) -> str:
+    """What a user needs to see at start: where the router listens and which protections are on."""
+    listen = json.loads(config.get_json("listen/endpoints"))
+    mtls = json.loads(config.get_json("transport/link/tls/enable_mtls"))
+    acl = json.loads(config.get_json("access_control/enabled"))
+    return (f"listening on {', '.join(map(str, listen)) or 'no endpoint'}; mutual TLS {'on' if mtls else 'OFF'}; "
+            f"access control {'on' if acl else 'OFF'}")
+
+
+def run(config_file: str, stop: threading.Event) -> int:
+    """Serve until ``stop`` is set; the exit code."""
+    try:
+        session, summary = open_router(config_file)
+    except ValueError as err:
+        print(f"skymesh router: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        print(f"skymesh router {session.info.zid()}: {summary}", flush=True)
+        while not stop.wait(0.5):  # a bounded wait: the signal handler runs between waits
+            pass
+    finally:
+        session.close()
+    return 0
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    """``skymesh router``: serve until SIGINT or SIGTERM."""
+    zenoh.init_log_from_env_or("error")
+    stop = threading.Event()
+    install_stop_handlers(stop)
+    return run(args.config, stop)
