@@ -34,7 +34,7 @@ from tests.tls_certs import write_fleet_certs
 
 REPO = Path(__file__).resolve().parents[2]
 DEPLOY = REPO / "deploy"
-CLIENTS = ["uav0", "uav1", "ground", "world"]
+CLIENTS = ["uav0", "uav1", "ground", "world", "stranger"]  # stranger: a CN router.json5 does not name
 SETTLE_S = 1.0  # for declarations to reach the router and back before a put (chosen here; loopback takes ms)
 
 
@@ -196,21 +196,25 @@ def test_a_client_without_a_fleet_certificate_cannot_open_a_session(deployment):
 def test_an_agent_may_publish_only_under_its_own_name(deployment):
     """Access control: uav1's certificate may put on uav1's keys and declare uav1's liveliness token (which a
     ground station joining later still learns), and not on another agent's keys or the world's truth; the world
-    may put the truth, which agents hear."""
+    may put the truth, which agents hear. A certificate of the fleet's CA whose CN the router does not name opens
+    a session in which nothing is allowed: it hears nothing and nobody hears it (only its own put, locally)."""
     fleet = f"acl-{uuid.uuid4().hex[:8]}"
     root = f"skymesh/{fleet}"
     forged = {f"{root}/belief/track/uav0", f"{root}/topology/uav0", f"{root}/telemetry/uav0", f"{root}/sim/truth",
               f"{root}/sim/measurement/uav0"}
     own = {f"{root}/belief/track/uav1", f"{root}/topology/uav1", f"{root}/telemetry/uav1"}
-    with deployment.session("ground") as ground, deployment.session("uav0") as uav0:
+    with (deployment.session("ground") as ground, deployment.session("uav0") as uav0,
+          deployment.session("stranger") as stranger):
         with deployment.session("uav1") as uav1, deployment.session("world") as world:
             tokens = [uav1.liveliness().declare_token(f"{root}/alive/{name}") for name in ("uav0", "uav1")]
             time.sleep(SETTLE_S)  # the ground station joins later: it learns the tokens from its history
             watch, agent_heard = Heard(ground, f"{root}/**", f"{root}/alive/*"), Heard(uav0, f"{root}/sim/truth")
+            stranger_heard = Heard(stranger, f"{root}/**")
             time.sleep(SETTLE_S)
             for key in sorted(forged | own):
                 uav1.put(key, b"from uav1")
             world.put(f"{root}/sim/truth", b"from the world")
+            stranger.put(f"{root}/belief/track/stranger", b"from a certificate the router does not name")
             time.sleep(SETTLE_S)
             alive = set(watch.alive)
             for token in tokens:
@@ -219,15 +223,21 @@ def test_an_agent_may_publish_only_under_its_own_name(deployment):
     assert watch.payloads[f"{root}/sim/truth"] == b"from the world"
     assert agent_heard.payloads == {f"{root}/sim/truth": b"from the world"}
     assert alive == {f"{root}/alive/uav1"}
+    assert stranger_heard.payloads == {f"{root}/belief/track/stranger": b"from a certificate the router does not name"}
 
 
 def test_a_missing_or_bad_config_is_one_line_and_exit_code_2(tmp_path, capsys):
+    """A file that is missing, not JSON5, has a misspelt field or names a key that does not exist."""
     bad = tmp_path / "bad.json5"
     bad.write_text('{ mode: "router", listen: { endpoints: [ }')
     unknown = tmp_path / "unknown.json5"
     unknown.write_text('{ mode: "router", transport: { link: { tls: { enable_mtl: true } } } }')  # a typo
+    no_key = tmp_path / "no_key.json5"
+    no_key.write_text(json.dumps({"listen": {"endpoints": [f"tls/127.0.0.1:{free_port()}"]},
+                                  "transport": {"link": {"tls": {"listen_certificate": "certs/none.pem",
+                                                                 "listen_private_key": "certs/none-key.pem"}}}}))
     for path, says in ((tmp_path / "missing.json5", "No such file"), (bad, "expected array"),
-                       (unknown, "unknown field `enable_mtl`")):
+                       (unknown, "unknown field `enable_mtl`"), (no_key, "Invalid TLS private key file")):
         assert cli.main(["router", "--config", str(path)]) == cli.EXIT_USAGE
         err = capsys.readouterr().err
         assert err.startswith(f"skymesh router: {path}: ") and says in err, err
