@@ -4,9 +4,9 @@ On one machine ``skymesh run`` opens its own router on loopback. Across machines
 station and (in hardware-in-the-loop runs) the simulated world connect to a router that is started from a
 standard Zenoh JSON5 file, typically ``deploy/router.json5``: TLS with mutual authentication, so that a
 process without a certificate signed by the fleet's CA cannot open a session at all, and access control,
-so that an agent may only publish under its own name. This is Eclipse's ``zenohd`` reading the same file,
-without installing it: the ``eclipse-zenoh`` wheel the agents already use, whatever the file's ``mode``
-says, opened in router mode.
+so that an agent may only publish under its own name. The file is the kind Eclipse's ``zenohd`` reads; this
+command needs nothing beyond the ``eclipse-zenoh`` wheel the agents already use, and opens it in router
+mode whatever its ``mode`` says.
 
 The process prints the endpoints it listens on (as configured) and whether mTLS and access control are on,
 then runs until SIGINT or SIGTERM (exit 0). A config file that is missing, unreadable or refused by Zenoh

@@ -42,7 +42,6 @@ SETTLE_S = 1.0  # for declarations to reach the router and back before a put (ch
 class Deployment:
     folder: Path  # configs and certs/, the processes' working folder
     port: int
-    router: subprocess.Popen
 
     def session(self, name: str) -> zenoh.Session:
         """A session with ``name``'s certificate, from its copy of ``deploy/agent.json5`` (raises if refused)."""
@@ -79,7 +78,7 @@ def deployment(tmp_path_factory):
         if f"listening on tls/localhost:{port}; mutual TLS on; access control on" not in banner:
             router.kill()
             pytest.fail(f"the router did not start as configured: {banner!r} {router.communicate()[1][-2000:]}")
-        yield Deployment(folder, port, router)
+        yield Deployment(folder, port)
         router.send_signal(signal.SIGTERM)
         assert router.wait(timeout=15) == 0, router.stderr.read()
     finally:
