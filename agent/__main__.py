@@ -2,7 +2,9 @@
 
 Example: ``python -m agent --id uav0 --index 0 --fleet demo --scenario run/scenario.json
 --connect tcp/127.0.0.1:7447 --epoch 1700000000.0 --out run/``. With ``--zenoh-config FILE`` the agent
-uses a standard Zenoh JSON5 configuration instead (a real deployment across machines).
+uses a standard Zenoh JSON5 configuration instead (a real deployment across machines: ``deploy/agent.json5``
+connects over mutual TLS with the agent's certificate). A session that cannot be opened — no router there, or one
+that refuses the agent's certificate — is one line on stderr and exit code 1.
 
 ``--mavlink URL`` flies a real (or SITL) PX4 or ArduPilot autopilot at a pymavlink connection string
 (``udpin:0.0.0.0:14540`` for PX4 SITL, ``tcp:127.0.0.1:5760`` for ArduPilot SITL, ``/dev/ttyUSB0``) instead of the
