@@ -18,33 +18,21 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
-import sys
 import threading
 
 import zenoh
 
-from agent.runtime import install_stop_handlers
-
-EXIT_USAGE = 2
-_SOURCE_LOCATION = re.compile(r"\s+at \S+\.rs:\d+\.?")  # zenoh appends the Rust file and line of each error
-
-
-def one_line(err: Exception) -> str:
-    """Zenoh's error text on one line, without the Rust source locations it appends."""
-    return " ".join(_SOURCE_LOCATION.sub("", str(err)).split())
+from agent.net.zenoh_transport import SessionError, load_config, open_session
+from agent.runtime import install_stop_handlers, usage_error
 
 
 def open_router(config_file: str) -> tuple[zenoh.Session, str]:
-    """A router session from ``config_file`` and its :func:`describe` line; ``ValueError`` (one line) if Zenoh
-    refuses the file."""
-    try:
-        config = zenoh.Config.from_file(config_file)
-        config.insert_json5("mode", json.dumps("router"))
-        summary = describe(config)
-        return zenoh.open(config), summary
-    except zenoh.ZError as err:
-        raise ValueError(f"{config_file}: {one_line(err)}") from None
+    """A router session from ``config_file`` and its :func:`describe` line. ``ValueError`` if Zenoh refuses the
+    file, :class:`SessionError` if it cannot open the session (a certificate it cannot read, a port in use)."""
+    config = load_config(None, config_file)
+    config.insert_json5("mode", json.dumps("router"))
+    summary = describe(config)
+    return open_session(config), summary
 
 
 def describe(config: zenoh.Config) -> str:
@@ -60,9 +48,8 @@ def run(config_file: str, stop: threading.Event) -> int:
     """Serve until ``stop`` is set; the exit code."""
     try:
         session, summary = open_router(config_file)
-    except ValueError as err:
-        print(f"skymesh router: {err}", file=sys.stderr)
-        return EXIT_USAGE
+    except (ValueError, SessionError) as err:
+        return usage_error("skymesh router", err)
     try:
         print(f"skymesh router {session.info.zid()}: {summary}", flush=True)
         while not stop.wait(0.5):  # a bounded wait: the signal handler runs between waits

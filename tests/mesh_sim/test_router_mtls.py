@@ -192,6 +192,24 @@ def test_a_client_without_a_fleet_certificate_cannot_open_a_session(deployment):
 
 
 @pytest.mark.slow
+def test_an_agent_process_with_a_rogue_certificate_stops_at_start(deployment):
+    """``python -m agent`` with a certificate of another CA (its CN uav0) cannot join the fleet: one line on stderr
+    and exit code 2 before its loop starts (Zenoh says only that the router could not be reached)."""
+    scenario = deployment.folder / "rogue-scenario.json"
+    scenario.write_text(json.dumps(load("default", agents=1, duration=1.0).raw))
+    done = subprocess.run(
+        [sys.executable, "-m", "agent", "--id", "uav0", "--index", "0", "--fleet", "rogue", "--scenario", str(scenario),
+         "--zenoh-config", "rogue.json5", "--out", str(deployment.folder), "--parent-pid", str(os.getpid())],
+        cwd=deployment.folder, env=_env(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE, text=True, timeout=60)  # run kills the process by its PID if it outlives this
+    assert done.returncode == 2, done.stderr[-3000:]
+    assert done.stderr.startswith("agent uav0: the Zenoh router could not be reached (Unable to connect to any of"), \
+        done.stderr
+    assert done.stderr.count("\n") == 1, done.stderr
+    assert not (deployment.folder / "agent-uav0.json").exists()
+
+
+@pytest.mark.slow
 def test_an_agent_may_publish_only_under_its_own_name(deployment):
     """Access control: uav1's certificate may put on uav1's keys and declare uav1's liveliness token (which a
     ground station joining later still learns), and not on another agent's keys or the world's truth; the world
@@ -235,9 +253,17 @@ def test_a_missing_or_bad_config_is_one_line_and_exit_code_2(tmp_path, capsys):
     no_key.write_text(json.dumps({"listen": {"endpoints": [f"tls/127.0.0.1:{free_port()}"]},
                                   "transport": {"link": {"tls": {"listen_certificate": "certs/none.pem",
                                                                  "listen_private_key": "certs/none-key.pem"}}}}))
-    for path, says in ((tmp_path / "missing.json5", "No such file"), (bad, "expected array"),
-                       (unknown, "unknown field `enable_mtl`"), (no_key, "Invalid TLS private key file")):
+
+    def refused(path: Path) -> str:
         assert cli.main(["router", "--config", str(path)]) == cli.EXIT_USAGE
         err = capsys.readouterr().err
-        assert err.startswith(f"skymesh router: {path}: ") and says in err, err
         assert err.count("\n") == 1 and ".rs:" not in err, err
+        return err
+
+    for path, says in ((tmp_path / "missing.json5", "No such file"), (bad, "--> 1:42"),
+                       (unknown, "unknown field `enable_mtl`")):
+        err = refused(path)
+        assert err.startswith(f"skymesh router: cannot read Zenoh config {path}: ") and says in err, err
+    err = refused(no_key)
+    assert err.startswith("skymesh router: cannot open the Zenoh session (Cannot create a new TLS listener"), err
+    assert "Invalid TLS private key file" in err, err
