@@ -2,7 +2,8 @@
 
 Example: ``python -m agent --id uav0 --index 0 --fleet demo --scenario run/scenario.json
 --connect tcp/127.0.0.1:7447 --epoch 1700000000.0 --out run/``. With ``--zenoh-config FILE`` the agent
-uses a standard Zenoh JSON5 configuration instead (a real deployment across machines).
+uses a standard Zenoh JSON5 configuration instead (a real deployment across machines: ``deploy/agent.json5``
+connects over mutual TLS with the agent's certificate).
 
 ``--mavlink URL`` flies a real (or SITL) PX4 or ArduPilot autopilot at a pymavlink connection string
 (``udpin:0.0.0.0:14540`` for PX4 SITL, ``tcp:127.0.0.1:5760`` for ArduPilot SITL, ``/dev/ttyUSB0``) instead of the
@@ -13,7 +14,8 @@ code 2) before the agent's loop starts.
 ``--camera SOURCE`` replaces the synthetic camera with an OpenCV video source (a file path, a device
 index such as ``0``, a stream URL): one frame is read per agent step, the pose comes from the vehicle as
 usual. A source that cannot be opened is an error at start (exit code 2), and so are a Zenoh router that cannot be
-reached and an ``--index`` outside the scenario's team.
+reached (or that refuses the agent's certificate: Zenoh does not tell the two apart) and an ``--index`` outside the
+scenario's team.
 
 The process imports only what its scenario uses (issue 12): OpenCV comes with a camera (the ``camera``
 sensor, ``--camera``, or a ``[grid]``'s thermal camera), never with the geometric bearing sensor; neither

@@ -21,7 +21,9 @@
   [--latency-ms MS] [--offboard-port P] [--gcs-port P] ...`` — a MAVLink autopilot simulator that behaves like
   PX4 SITL instance ``I`` (a subset) around the kinematic vehicle model (``mesh_sim.autopilot``; the same as
   ``python -m mesh_sim.autopilot``): it binds 14580+I and sends to 14540+I (offboard), binds 18570+I and sends
-  to 14550 (ground station), until SIGTERM / SIGINT, ``--duration`` or the death of ``--parent-pid``.
+  to 14550 (ground station), until SIGTERM / SIGINT, ``--duration`` or the death of ``--parent-pid``;
+* ``skymesh router --config FILE`` — a Zenoh router from a JSON5 file (``mesh_sim.router``), e.g.
+  ``deploy/router.json5``: mutual TLS and access control for a deployment across machines, until SIGTERM / SIGINT.
 
 Exit codes: 0 success, 1 a run that failed (a child died) or runs that differ, 2 usage error (unknown
 benchmark or scenario, bad settings, not a run folder) or a bad environment (an output folder that cannot be
@@ -142,6 +144,13 @@ def build_parser() -> argparse.ArgumentParser:
                                     description="A MAVLink autopilot simulator that behaves like PX4 SITL instance I "
                                                 "(a subset) around skymesh's kinematic vehicle models.")
     add_autopilot_arguments(autopilot)
+
+    router = commands.add_parser("router", help="a Zenoh router from a JSON5 file (mutual TLS, access control)",
+                                 description="A Zenoh router for a deployment across machines, from a Zenoh JSON5 "
+                                             "file (see deploy/README.md). Runs until SIGINT or SIGTERM.")
+    router.add_argument("--config", required=True, metavar="FILE",
+                        help="a Zenoh JSON5 config file, e.g. deploy/router.json5 (relative paths in it are read "
+                             "from the current folder)")
     return parser
 
 
@@ -311,6 +320,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from mesh_sim.autopilot.cli import run_from_args
 
         return run_from_args(args)
+    if args.command == "router":
+        from mesh_sim.router import run_from_args as run_router
+
+        return run_router(args)
     if args.command == "stress":
         args.name, args.list = "stress", False
         return _bench(args)

@@ -54,12 +54,18 @@ def router_config(listen: list[str]) -> zenoh.Config:
     return c
 
 
+def zenoh_message(err: Exception) -> str:
+    """Zenoh's error text on one line for a user: without the Rust source locations it appends, and a JSON5
+    syntax error's caret drawing folded into one line."""
+    return " ".join(re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(err)).split())
+
+
 def load_config(connect: list[str] | None, config_file: str | None) -> zenoh.Config:
     if config_file:
         try:
             return zenoh.Config.from_file(config_file)
         except Exception as err:  # zenoh raises its own ZError; say which file was wrong
-            raise ValueError(f"cannot read Zenoh config {config_file}: {err}") from None
+            raise ValueError(f"cannot read Zenoh config {config_file}: {zenoh_message(err)}") from None
     if not connect:
         raise ValueError("give a router endpoint to connect to (--connect) or a Zenoh config file (--zenoh-config)")
     return client_config(connect)
@@ -76,7 +82,7 @@ def open_session(config: zenoh.Config) -> zenoh.Session:
     try:
         return zenoh.open(config)
     except zenoh.ZError as err:
-        text = re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(err)).strip()
+        text = zenoh_message(err)
         if text.startswith("Unable to connect"):
             raise SessionError(f"the Zenoh router could not be reached ({text})") from None
         raise SessionError(f"cannot open the Zenoh session ({text})") from None
