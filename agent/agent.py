@@ -139,9 +139,9 @@ class Agent:
             env = wire.decode(item.data, expected_origin=origin, key=self.fleet_key, kinds=self.kinds)
         except wire.DecodeError as err:
             return self._reject(origin or "world", err.reason)
-        verdict = self.window.admit(env.origin, env.kind, env.seq, t)
-        if verdict == "duplicate":
-            return self._reject(env.origin, "duplicate", log_it=False)
+        verdict = self.window.admit(env.origin, env.kind, env.seq, t, env.stamp)
+        if verdict in ("duplicate", "stale"):  # a replay (agent.net.incarnation), or a copy the mesh delivered twice
+            return self._reject(env.origin, verdict, log_it=False)
         for exchange in self.exchanges.values() if verdict == "restarted" else ():  # it holds nothing of ours now
             getattr(exchange, "peer_restarted", lambda peer: None)(env.origin)
         try:

@@ -12,6 +12,12 @@ of its new life is larger than every number of the old one, so the existing "new
 (the receive window, grid baselines, flood acknowledgements) accept the new life and never a replay of the
 old, and a receiver tells a restart from the first number of a higher incarnation. The envelope format is
 unchanged (``"s"`` is an unsigned 64-bit integer, :mod:`agent.net.wire`).
+
+The numbers protect a receiver only as long as it remembers them: a receiver that restarted has forgotten
+every peer's last number, and would take a recorded message of a peer's (signed with the fleet key) for a new
+one. So a message is also refused when its stamp is more than :data:`REPLAY_WINDOW_S` older than the
+receiver's clock (``"stale"``): envelopes are stamped when they are sent (a relayed detection travels in a
+new envelope), and the fleet shares one simulation clock, so only a replay or a badly skewed clock is older.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ log = logging.getLogger("skymesh.agent")
 
 INCARNATION_SHIFT = 32  # bits of the per-incarnation count (chosen here)
 MAX_INCARNATION = (1 << (64 - INCARNATION_SHIFT)) - 1  # seq stays below 2**64
+REPLAY_WINDOW_S = 5.0  # s a message's stamp may lag the receiver's clock; chosen here (links delay ms, not s)
 
 
 def first_number(incarnation: int) -> int:
@@ -46,10 +53,13 @@ class ReceiveWindow:
         self._incarnation: dict[str, int] = {}
         self.restarts: list[tuple[str, int, float]] = []  # (origin, incarnation, t) each time a peer came back
 
-    def admit(self, origin: str, kind: str, seq: int, t: float) -> str | None:
-        """``"duplicate"`` for a message not newer than the last one of its kind used from ``origin``;
-        ``"restarted"`` for the first message of a newer incarnation of an origin heard before (recorded then);
-        ``None`` otherwise. Nothing moves the window: :meth:`used` does, once the message was applied."""
+    def admit(self, origin: str, kind: str, seq: int, t: float, stamp: float | None = None) -> str | None:
+        """``"stale"`` for a message stamped more than :data:`REPLAY_WINDOW_S` before ``t``; ``"duplicate"`` for
+        one not newer than the last one of its kind used from ``origin``; ``"restarted"`` for the first message
+        of a newer incarnation of an origin heard before (recorded then); ``None`` otherwise. Nothing moves the
+        window: :meth:`used` does, once the message was applied."""
+        if stamp is not None and stamp < t - REPLAY_WINDOW_S:
+            return "stale"
         last = self._last.get((origin, kind))
         if last is not None and seq <= last:
             return "duplicate"

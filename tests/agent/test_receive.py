@@ -26,8 +26,8 @@ def setup():
     return agent, bus.endpoint("sender", []), keys
 
 
-def send(endpoint, key: str, kind: str, origin: str, seq: int, payload: dict) -> None:
-    endpoint.publish(key, wire.encode(wire.Envelope(kind=kind, origin=origin, seq=seq, stamp=0.0, payload=payload)))
+def send(endpoint, key: str, kind: str, origin: str, seq: int, payload: dict, stamp: float = 0.0) -> None:
+    endpoint.publish(key, wire.encode(wire.Envelope(kind=kind, origin=origin, seq=seq, stamp=stamp, payload=payload)))
 
 
 def test_a_rejected_track_message_does_not_move_the_sequence_window():
@@ -83,7 +83,8 @@ def test_a_track_from_far_in_the_past_or_future_is_rejected_without_stalling_the
         belief = Trajectory.prior(tracker.model, epoch)
         belief = belief.update(np.hstack([np.eye(3), np.zeros((3, 3))]), np.eye(3), np.zeros(3))
         entry = {"id": 1, "belief": encode_trajectory(belief), "last_measured": 0.0, "acks": {}}
-        send(sender, keys.belief("track", "uav1"), "track", "uav1", seq, {"tracks": [entry]})
+        send(sender, keys.belief("track", "uav1"), "track", "uav1", seq, {"tracks": [entry]},
+             stamp=10**5 * tracker.model.step)  # a fresh envelope: its payload's epochs are the fault
     agent.step(10**5 * tracker.model.step)
     assert agent.rejected == {"past_epoch": 1, "future_epoch": 1}
     assert tracker.tracks == {}

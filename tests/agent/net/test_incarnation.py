@@ -17,7 +17,7 @@ from agent.net import wire
 from agent.net.bus import InMemoryBus
 from agent.net.flood_relay import FloodRelay
 from agent.net.gaussian_codec import encode_trajectory
-from agent.net.incarnation import MAX_INCARNATION, ReceiveWindow, first_number, incarnation_of
+from agent.net.incarnation import MAX_INCARNATION, REPLAY_WINDOW_S, ReceiveWindow, first_number, incarnation_of
 from agent.net.keys import Keys
 from fusion.trajectory import Trajectory
 
@@ -46,6 +46,29 @@ def test_the_window_tells_duplicates_restarts_and_replays_of_an_old_life():
     assert window.admit("uav1", "grid", first_number(1) + 2, 9.2) is None  # the restart is told once
     assert window.admit("uav1", "track", 6, 9.4) == "duplicate"  # a replay of the old life
     assert window.metrics() == {"peer_restarts": [["uav1", 1, 9.0]]}
+
+
+def test_a_receiver_that_restarted_refuses_a_replay_by_its_stamp():
+    """The audit's case: a restarted receiver has forgotten every number, so a recorded 19-s-old message of a peer
+    (validly signed) is refused by its stamp alone; a message delayed within the window is not."""
+    fresh = ReceiveWindow()  # the receiver's new life: no numbers remembered
+    assert fresh.admit("uav1", "track", 5, 20.0, stamp=1.0) == "stale"
+    assert fresh.admit("uav1", "track", 5, 20.0, stamp=20.0 - REPLAY_WINDOW_S) is None
+    assert fresh.admit("uav1", "track", 5, 20.0, stamp=19.6) is None
+
+
+def test_an_agent_refuses_a_signed_replay_older_than_the_window():
+    """Bad input: uav1's genuine, signed topology report recorded at t = 1 s and replayed to an agent whose clock
+    reads 20 s (it restarted and remembers nothing): rejected as ``stale``, its content unused."""
+    keys, key = Keys(f"inc-{uuid.uuid4().hex[:8]}"), b"k" * 32
+    bus = InMemoryBus()
+    uav0 = Agent("uav0", 0, AgentScenario(agents=2), bus.endpoint("uav0", keys.agent_subscriptions()), keys,
+                 seed=0, fleet_key=key)
+    report = wire.Envelope(kind="topology", origin="uav1", seq=3, stamp=1.0,
+                           payload={"reports": {"uav1": [1.0, ["uav0"]]}})
+    bus.endpoint("uav1", []).publish(keys.topology("uav1"), wire.encode(report, key))
+    uav0.step(20.0)
+    assert uav0.rejected["stale"] == 1 and uav0.topology.neighbours(20.0) == []
 
 
 def test_a_rejected_restart_message_does_not_move_the_window():
