@@ -321,4 +321,4 @@ def test_a_vehicle_param_the_model_refuses_stops_the_simulator_with_exit_2(capsy
 
     options = AutopilotOptions(offboard_port=0, gcs_port=0, vehicle_params=(("warp_factor", 9.0),))
     assert run(options, threading.Event()) == 2
-    assert "warp_factor" in capsys.readouterr().out
+    assert "warp_factor" in capsys.readouterr().err  # one line on stderr: stdout carries the JSON lines
