@@ -28,10 +28,9 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-from mesh_sim.phases import CONFIDENCE, anees_interval
+from mesh_sim.phases import CONFIDENCE, DECORRELATION_S, anees_interval
 from mesh_sim.results import pooled
 
-DECORRELATION_S = 10.0  # one independent NEES sample per target per this many tracked seconds (motion tau)
 ANEES_FLOOR = 0.5  # issue 11: an agent's ANEES below this is wastefully conservative
 #: Fleet RMSE / oracle RMSE limits (issue 11): (topologies, losses, methods, limit, ratio the goal is on).
 RATIO_GOALS = (

@@ -57,7 +57,8 @@ def _target(name: str, bins: list[list[float]]) -> dict:
 
 def test_a_two_phase_run_gives_each_phase_its_own_figures_and_verdict():
     """Phase 1 (0-10 s): the fleet's squared error 4 m^2 per sample, NEES 6 (ANEES 1); phase 2 (10-20 s): 16 m^2,
-    NEES 1.8 (ANEES 0.3). The oracle: 1 m^2 throughout."""
+    NEES 0.6 (ANEES 0.1). The oracle: 1 m^2 throughout. One target tracked 10 s per phase: one independent
+    sample (DECORRELATION_S), whatever the 100 evaluations."""
     def agent(se2, nees2):
         return [_target("car", [[float(k), 4.0 * 5, 6.0 * 5, 5] for k in range(10)]
                         + [[float(k), se2 * 5, nees2 * 5, 5] for k in range(10, 20)])]
@@ -66,7 +67,7 @@ def test_a_two_phase_run_gives_each_phase_its_own_figures_and_verdict():
     in_flight = [_target("car", [[float(k), 4.0 * 5, 3.0 * 5, 5] for k in range(20)])]  # 4 m^2: what could arrive
     raw = {"radio": {"events": [{"t": 10.0, "kind": "partition", "groups": [["uav0"], ["uav1"]]}]},
            "radio_plan": {"phases": [{"t": 0.0, "edges": "all"}, {"t": 10.0, "edges": []}]}}
-    metrics = {"agents": [{"id": "uav0", "targets": agent(16.0, 1.8)}, {"id": "uav1", "targets": agent(16.0, 1.8)},
+    metrics = {"agents": [{"id": "uav0", "targets": agent(16.0, 0.6)}, {"id": "uav1", "targets": agent(16.0, 0.6)},
                           {"id": "uav2", "status": "died: no metrics written"}],
                "oracle": {"targets": oracle, "in_flight": {"uav0": in_flight, "uav1": in_flight}},
                "config": raw, "losses": []}
@@ -75,13 +76,25 @@ def test_a_two_phase_run_gives_each_phase_its_own_figures_and_verdict():
     assert (second["name"], second["start_s"], second["end_s"]) == ("partition", 10.0, 20.0)
     assert first["samples"] == second["samples"] == 100
     assert (first["fleet_rmse"], first["oracle_rmse"], first["rmse_ratio_to_oracle"]) == pytest.approx((2, 1, 2))
-    assert (second["fleet_rmse"], second["rmse_ratio_to_oracle"], second["anees"]) == pytest.approx((4, 4, 0.3))
-    lo, hi = chi2.ppf([0.025, 0.975], 600) / 600
-    assert first["anees_interval"] == pytest.approx([lo, hi]) and lo < 1 < hi
+    assert (second["fleet_rmse"], second["rmse_ratio_to_oracle"], second["anees"]) == pytest.approx((4, 4, 0.1))
+    assert first["independent_samples"] == second["independent_samples"] == 1
+    lo, hi = chi2.ppf([0.025, 0.975], 6) / 6
+    assert first["anees_interval"] == pytest.approx([lo, hi]) and lo < 1 < hi and lo > 0.1
     assert first["anees_inside"] and not second["anees_inside"]
     assert (first["rmse_ratio_to_in_flight"], second["rmse_ratio_to_in_flight"]) == pytest.approx((1, 2))
     assert first["oracle_anees"] == second["oracle_anees"] == pytest.approx(1.0)
     assert "reconverged_after_s" not in first and "reconverged_after_s" not in second
+
+
+def test_independent_samples_count_one_per_target_per_decorrelation_time():
+    """Per target its longest tracked time over the agents (1 s bins with samples), one sample per 10 s of it, at
+    least one; a target nobody tracked in the window counts for nothing."""
+    a = [_target("car", [[float(k), 1.0, 1.0, 5] for k in range(25)]), _target("walker", [[3.0, 1.0, 1.0, 5]])]
+    b = [_target("car", [[float(k), 1.0, 1.0, 5] for k in range(12)]), _target("dog", [[40.0, 1.0, 1.0, 5]])]
+    assert phases.independent_samples([a, b], 0.0, 30.0) == 2 + 1  # car 25 s -> 2, walker 1 s -> 1, dog outside
+    assert phases.independent_samples([a, b], 0.0, 100.0) == 2 + 1 + 1
+    assert phases.independent_samples([b], 0.0, 9.0) == 1  # 9 s of the car: still one
+    assert phases.independent_samples([], 0.0, 9.0) == 0
 
 
 def test_phases_start_at_radio_events_losses_and_rejoins():
