@@ -143,3 +143,22 @@ def test_an_agent_named_outside_its_fleet_is_refused():
     keys = Keys(f"rx-{uuid.uuid4().hex[:8]}")
     with pytest.raises(ValueError, match="fleet"):
         Agent("uav2", 2, AgentScenario(agents=2), InMemoryBus().endpoint("uav2", []), keys, seed=0)
+
+
+def test_a_message_of_many_new_tracks_costs_the_gate_once_per_track_not_once_per_pair(monkeypatch):
+    """Bad input (skymesh bench fuzz: the receive path slowed as tracks accumulated): a message adopting 64
+    tracks 50 m apart. Matching each to the local tracks and merging duplicates tested the track-to-track gate
+    pair by pair, one 3x3 solve each (~4,000 solves, ~0.25 s: a hang); the gate distances from one track to all
+    others are now one batched solve, so the solves grow with the tracks, not with their pairs."""
+    agent, sender, keys = setup()
+    model = agent.exchanges["track"].tracker.model
+    prior = Trajectory.prior(model, 0)
+    seen = np.hstack([np.eye(3), np.zeros((3, model.state_dim - 3))])
+    entries = [{"id": i, "belief": encode_trajectory(prior.update(seen, np.eye(3), np.array([50.0 * i, 0.0, 0.0]))),
+                "last_measured": 0.0, "acks": {}} for i in range(64)]
+    send(sender, keys.belief("track", "uav1"), "track", "uav1", 1, {"tracks": entries})
+    solves, solve = [], np.linalg.solve
+    monkeypatch.setattr(np.linalg, "solve", lambda *args: solves.append(1) or solve(*args))
+    agent.step(0.0)
+    assert len(agent.exchanges["track"].tracker.tracks) == 64 and not agent.rejected
+    assert len(solves) <= 3 * 64
