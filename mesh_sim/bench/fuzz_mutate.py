@@ -151,7 +151,9 @@ class Mutator:
         return self._input("nested", self.fresh(payload=_replaced(self.case.seed.payload, path, NEST_MARKER)), False)
 
     def _origin(self) -> Input:
-        env = self.fresh(origin=f"uav{int(self.rng.integers(2, 100))}")
+        """An envelope naming another agent than the sender whose key it arrives on (never the sender itself)."""
+        other = f"uav{int(self.rng.integers(2, 100))}"
+        env = self.fresh(origin=other if other != self.origin else "uav100")
         return self._input("origin", env, self.case.spec.kind != "truth")  # truth comes from the world, any name
 
     def _replay(self) -> Input:

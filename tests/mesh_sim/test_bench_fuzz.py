@@ -10,8 +10,9 @@ import time
 import numpy as np
 import pytest
 
+from agent.net import wire
 from mesh_sim.bench import fuzz, fuzz_seeds
-from mesh_sim.bench.fuzz_mutate import FAMILIES
+from mesh_sim.bench.fuzz_mutate import FAMILIES, Mutator
 
 BUDGET = 2 * len(FAMILIES)  # every family twice
 
@@ -82,3 +83,12 @@ def test_each_detector_fires_on_a_planted_fault(track_cases, i, fault, family):
     else:
         assert result["accepted_invalid_by_family"] == {family: planted}
         assert len(result["accepted_invalid_examples"]) == planted
+
+
+def test_a_wrong_origin_is_never_the_senders_own_name(track_cases):
+    """The fuzzer's sender takes other fleet members' names (uav2, ...) once it spent a sequence window: a "wrong
+    origin" drawn from uav2 .. uav99 was once its own name, a valid message counted as an accepted invalid one."""
+    mutator = Mutator(track_cases[0], np.random.default_rng(0))
+    mutator.origin = "uav7"
+    origins = {wire.peek_header(mutator.make("origin").data).origin for _ in range(500)}
+    assert "uav7" not in origins and len(origins) > 50
