@@ -25,6 +25,7 @@ Goals (issue 16): ≥ 10⁵ inputs per kind (full run), 0 crashes, 0 hangs, 0 in
 
 from __future__ import annotations
 
+import copyreg
 import hashlib
 import io
 import logging
@@ -60,8 +61,8 @@ class AgentTarget:
 
     def __init__(self, case: Case):
         self.case, self.agent = case, case.agent
-        self._opaque = {id(self.agent), id(self.agent.terrain), id(self.agent.vehicle), id(self.agent.planner),
-                        id(self.agent.sensor)}
+        opaque = (self.agent, self.agent.terrain, self.agent.vehicle, self.agent.planner, self.agent.sensor)
+        self._by_reference = {**copyreg.dispatch_table, **{type(part): _reference for part in opaque}}
 
     def decode(self, inp: Input) -> None:
         """The decoder alone, as the agent calls it."""
@@ -75,20 +76,19 @@ class AgentTarget:
         return self.agent.rejected.total()
 
     def digest(self) -> str:
-        """SHA-256 of the agent's beliefs: its exchanges, its world truth and its topology (the agent itself, its
-        terrain, vehicle, planner and sensor are references, not content)."""
+        """SHA-256 of the agent's beliefs: its exchanges, its world truth and its topology. The agent itself, its
+        terrain, vehicle, planner and sensor are references, not content: they pickle as their type's name (looked
+        up by type in C, so a digest costs ~2 ms, not the ~6 ms of a Python call per pickled object)."""
         buf = io.BytesIO()
-        _Pickler(buf, self._opaque).dump((self.agent.exchanges, vars(self.agent.world), self.agent.topology))
+        pickler = pickle.Pickler(buf, protocol=5)
+        pickler.dispatch_table = self._by_reference
+        pickler.dump((self.agent.exchanges, vars(self.agent.world), self.agent.topology))
         return hashlib.sha256(buf.getvalue()).hexdigest()
 
 
-class _Pickler(pickle.Pickler):
-    def __init__(self, buf, opaque: set[int]):
-        super().__init__(buf, protocol=5)
-        self.opaque = opaque
-
-    def persistent_id(self, obj):
-        return id(obj) if id(obj) in self.opaque else None
+def _reference(part) -> tuple:
+    """How :meth:`AgentTarget.digest` pickles a part of the agent that is not its beliefs: by its type's name."""
+    return str, (type(part).__qualname__,)
 
 
 @dataclass
