@@ -57,8 +57,10 @@ class Planted(fuzz.AgentTarget):
             return super().receive(inp)
         if self.fault == "crash":
             raise RuntimeError("planted")
-        if self.fault == "hang":
-            time.sleep(1.2 * fuzz.HANG_S)
+        if self.fault == "hang":  # busy: hangs are judged on CPU time
+            end = time.thread_time() + 1.2 * fuzz.HANG_S
+            while time.thread_time() < end:
+                pass
             return super().receive(inp)
         self.planted += 1
         self.agent.topology.heard(f"intruder{self.planted}", self.case.now)  # "accepted": a change, uncounted
