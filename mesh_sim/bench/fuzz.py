@@ -78,15 +78,16 @@ class AgentTarget:
     def rejected(self) -> int:
         return self.agent.rejected.total()
 
-    def digest(self) -> str:
-        """SHA-256 of the agent's beliefs: its exchanges, its world truth and its topology. The agent itself, its
-        terrain, vehicle, planner and sensor are references, not content: they pickle as their type's name (looked
-        up by type in C, so a digest costs ~2 ms, not the ~6 ms of a Python call per pickled object)."""
+    def digest(self) -> bytes:
+        """The agent's beliefs as bytes: its exchanges, its world truth and its topology, pickled (equal bytes, equal
+        beliefs; compared as they are, not hashed: a grid agent holds tens of MB, and hashing them cost more than
+        pickling). The agent itself, its terrain, vehicle, planner and sensor are references, not content: they
+        pickle as their type's name (looked up by type in C, not by a Python call per pickled object)."""
         buf = io.BytesIO()
         pickler = pickle.Pickler(buf, protocol=5)
         pickler.dispatch_table = self._by_reference
         pickler.dump((self.agent.exchanges, vars(self.agent.world), self.agent.topology))
-        return hashlib.sha256(buf.getvalue()).hexdigest()
+        return buf.getvalue()
 
 
 def _reference(part) -> tuple:

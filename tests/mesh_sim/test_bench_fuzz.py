@@ -34,6 +34,14 @@ def test_a_tiny_run_covers_every_kind_twice_and_finds_nothing(tmp_path):
     assert json.loads(path.read_text())["benchmark"] == "fuzz"
 
 
+def test_kinds_fuzzes_only_the_kinds_named_and_refuses_unknown_ones():
+    result = fuzz.run(quick=True, inputs=(len(FAMILIES), len(FAMILIES)), kinds=("clock",))
+    assert [(r["kind"], r["keyed"]) for r in result["rows"]] == [("clock", False), ("clock", True)]
+    assert result["settings"]["kinds"] == ["clock"]
+    with pytest.raises(ValueError, match="unknown fuzz kinds"):
+        fuzz.run(quick=True, kinds=("clock", "nope"))
+
+
 @pytest.fixture(scope="module")
 def track_cases():
     """Four copies of the channel-filter track case (each planted run gets an agent of its own)."""
