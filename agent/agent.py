@@ -11,7 +11,9 @@ It knows nothing of clocks or processes: the live harness (``agent.runtime``) ca
 the lockstep harness over an in-memory bus (with a radio plan wrapped in :class:`agent.net.radio.RadioTransport`).
 
 Every received message is decoded and validated (``agent.net.wire``) before it touches a belief; a
-rejected message is counted by reason and logged once per (peer, reason). Duplicates and messages older
+rejected message is counted by reason and logged once per (peer, reason). A message whose key names an origin
+outside the fleet (:attr:`agent.config.AgentScenario.fleet`) is rejected first (``unknown_origin``), so the
+state kept per peer is bounded by the fleet. Duplicates and messages older
 than the last one from the same origin are dropped by ``(origin, kind, seq)``; a peer's new incarnation (a
 restart, :mod:`agent.net.incarnation`) resets what the exchanges assumed they shared with it.
 """
@@ -48,6 +50,9 @@ class Agent:
     def __init__(self, agent_id: str, index: int, scenario: AgentScenario, transport, keys: Keys,
                  seed: int, fleet_key: bytes | None = None, camera=None, lockstep: bool = False, incarnation: int = 0):
         self.id, self.index, self.scenario, self.keys, self.fleet_key = agent_id, index, scenario, keys, fleet_key
+        self.fleet = scenario.fleet
+        if agent_id not in self.fleet:  # its peers would reject every message it sends (unknown_origin)
+            raise ValueError(f"agent id {agent_id!r} is not a member of the fleet ({', '.join(sorted(self.fleet))})")
         self.terrain = terrain_from_config(scenario.terrain)
         self.vehicle = vehicle_from_config(scenario.vehicle, scenario.start_position(index), 0.0, scenario.origin)
         self.sensor = sensor_from_config(scenario.sensor, seed, self.terrain, camera)
@@ -135,6 +140,8 @@ class Agent:
             return
         if parts[:2] == ("sim", "truth"):
             origin = None  # the world publishes truth under its own name, not under the key
+        elif origin not in self.fleet:  # before any per-peer state: a made-up name costs the agent nothing
+            return self._reject("?", "unknown_origin")
         try:
             env = wire.decode(item.data, expected_origin=origin, key=self.fleet_key, kinds=self.kinds)
         except wire.DecodeError as err:

@@ -82,6 +82,13 @@ class AgentScenario:
     def step(self) -> float:
         return 1.0 / self.rate_hz
 
+    @property
+    def fleet(self) -> frozenset[str]:
+        """The fleet's members, ``uav0`` .. ``uav{agents-1}`` (:func:`member_name`): who may send an agent its beliefs.
+        A receiver rejects any other origin before it keeps anything about it (``unknown_origin``), so what it holds
+        per peer is bounded by the fleet, not by the names a sender can make up."""
+        return frozenset(member_name(i) for i in range(self.agents))
+
     def start_position(self, index: int) -> np.ndarray:
         """Agents start spread along the southern edge of the area, at flight altitude."""
         (n0, _), (e0, e1) = self.area.north, self.area.east
@@ -119,6 +126,11 @@ class AgentScenario:
         if d.get("radio_plan") is not None:
             kwargs["radio_plan"] = LinkPlan.from_dict(d["radio_plan"])
         return cls(**kwargs)
+
+
+def member_name(index: int) -> str:
+    """The name of the fleet's agent of 0-based ``index``, as the launcher and the lockstep harness name them."""
+    return f"uav{index}"
 
 
 def check_seed(seed) -> int:

@@ -2,8 +2,8 @@
 
 * ``skymesh bench NAME [--quick] [--json PATH]`` — run a benchmark of :data:`mesh_sim.bench.BENCHMARKS`
   and print its tables (optionally writing the result as JSON); ``skymesh bench scale [--sensor bearing|camera]
-  [--sizes 8,16,32]``, ``skymesh bench fire [--seeds N]`` — the options of :data:`BENCH_OPTIONS`, for the
-  benchmarks that take them;
+  [--sizes 8,16,32]``, ``skymesh bench fire [--seeds N]``, ``skymesh bench fuzz [--kinds track,grid]`` — the
+  options of :data:`BENCH_OPTIONS`, for the benchmarks that take them;
 * ``skymesh bench --list`` — list the benchmarks;
 * ``skymesh run [--scenario NAME|FILE] [--agents N] [--duration S] [--speed X] [--seed K] [--out DIR]
   [--policy P] [--rerun save|spawn|connect:URL|off] [--camera uavK=SOURCE ...] [--vehicle kinematic|mavlink]``
@@ -47,7 +47,7 @@ from mesh_sim.bench.common import make_console, write_json
 
 STOPPED_BY = {"interrupted": 130, "terminated": 143}  # a run stopped by SIGINT / SIGTERM: 128 + the signal
 #: benchmark options beyond --quick and --json, for the benchmarks naming them
-BENCH_OPTIONS = ("sizes", "sensor", "seeds")
+BENCH_OPTIONS = ("sizes", "sensor", "seeds", "kinds")
 
 
 def _positive_int(text: str) -> int:
@@ -63,6 +63,11 @@ def _sizes(text: str) -> tuple[int, ...]:
     if not all(part.isdigit() and int(part) >= 1 for part in parts):
         raise argparse.ArgumentTypeError(f"must be positive integers separated by commas, e.g. 8,16,32; got {text!r}")
     return tuple(int(part) for part in parts)
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """``"track,grid"`` -> ``("track", "grid")``: comma-separated names (the benchmark judges them)."""
+    return tuple(part.strip() for part in text.split(",") if part.strip())
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -82,6 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--sensor", choices=sorted(SENSORS), help="scale: measure this sensor only (default: each)")
     bench.add_argument("--seeds", type=_positive_int, metavar="N",
                        help="fire: run N seeds (default: 5, or 1 with --quick)")
+    bench.add_argument("--kinds", type=_names, metavar="NAME,NAME,...",
+                       help="fuzz: fuzz only these message kinds, e.g. track,grid (default: every kind)")
 
     for name, text in (("run", "run a team of agents on a scenario"), ("demo", "run the default scenario")):
         run = commands.add_parser(name, help=text, description=text)

@@ -8,10 +8,11 @@ does not match its schema is rejected before any Python code touches it: ``bad_f
 a value out of range), ``bad_type`` (a wrong type), ``oversize`` (a list above its bound) — or the kind's
 own ``reason`` (the world's truth: ``bad_truth``).
 
-Kinds that peers exchange are typed to the last element. Kinds that only the ground station or the
-simulator read (``telemetry`` with the fields of every plug-in, ``measurement``, ``clock``, the grid and
-particle kinds whose codecs parse byte buffers) are ``Generic``: a str-keyed map of plain values and
-arrays, decoded in C and validated by their codecs.
+Kinds that peers exchange are typed to the last element, so a list longer than the kind allows (a grid's
+``shape`` of 10⁵ elements) is rejected in C before any Python code walks it. Kinds that only the ground
+station or the simulator read (``telemetry`` with the fields of every plug-in, ``measurement``, ``clock``,
+``grid_evidence``) and the particle kind whose codec parses byte buffers are ``Generic``: a str-keyed map
+of plain values and arrays, decoded in C and validated by their codecs.
 
 Unknown payload fields of a typed kind are ignored (a newer sender may add optional fields).
 """
@@ -114,6 +115,45 @@ class TruthPayload(TypedDict, total=False):
     decoys: NotRequired[list[list[float | bool | str | None]]]
 
 
+GridName = Annotated[str, msgspec.Meta(max_length=64)]  # a grid mode, dtype or belief name
+Pair = tuple[float, float]
+
+
+class GridGeometryPayload(TypedDict, total=False):
+    """A grid's geometry (:meth:`fusion.grid_geometry.GridGeometry.to_dict`)."""
+
+    origin: Pair
+    cell: float
+    shape: tuple[int, int]
+    height: float
+
+
+class GridCodecPayload(TypedDict, total=False):
+    """The codec's keyframe or delta (:func:`agent.net.grid_codec.decode_grid` says which fields each mode needs)."""
+
+    mode: GridName
+    L: int
+    shape: tuple[int, int]
+    values: bytes
+    base: int
+    n: int
+    dtype: GridName
+    index: bytes
+    q: float
+    vtype: GridName
+
+
+class GridPayload(TypedDict, total=False):
+    """Kind ``grid`` (:mod:`agent.beliefs.grid_exchange`): the sender's grid geometry, belief name, the codec's
+    payload (:mod:`agent.net.grid_codec`) and its acknowledgements. Every field is optional here: the exchange and
+    the codec report a missing one with their own reasons (``grid_geometry``, ``grid_bad_mode``)."""
+
+    geometry: GridGeometryPayload
+    belief: GridName
+    grid: GridCodecPayload
+    acks: Annotated[dict[PeerName, Seq], msgspec.Meta(max_length=MAX_PEERS)]
+
+
 @dataclass(frozen=True)
 class Schema:
     type: Any
@@ -128,6 +168,6 @@ PAYLOADS: dict[str, Schema] = {
     "telemetry": Schema(Generic),
     "measurement": Schema(Generic),
     "clock": Schema(Generic),
-    "grid": Schema(Generic),
+    "grid": Schema(GridPayload),
     "grid_evidence": Schema(Generic),
 }

@@ -22,7 +22,8 @@ Arrays travel as MessagePack ExtType ``EXT_NDARRAY`` whose data is::
 
 Decoding is done in C by msgspec against typed schemas: the envelope is the :class:`_Body` struct (every
 header field's type and range declared), the payload is decoded by its kind's schema
-(:data:`agent.net.schemas.PAYLOADS`), so no Python code walks the elements of a message. An array is
+(:data:`agent.net.schemas.PAYLOADS`), so no Python code walks the elements of a message; a generic payload
+is unpacked in C by msgpack with every list and map bounded (:data:`MAX_GENERIC_ITEMS`). An array is
 checked once, as a whole, when msgspec meets it: the declared shape against the byte count and
 MAX_ARRAY_ELEMENTS *before* it is created; the result is a writable copy, never a view of the received
 buffer. Values (finiteness, definiteness) are checked vectorised by the payload's codec.
@@ -94,6 +95,9 @@ EXT_NDARRAY = 1
 ALLOWED_DTYPES: frozenset[str] = frozenset({"<f8", "<f4", "<i4", "<i8", "|u1", "<u2"})
 MAC_BYTES = 32
 MAX_DEPTH = 32  # nesting of lists/maps inside a generic payload (the typed schemas fix their own)
+#: Elements of one list or map inside a generic payload (chosen here: an agent's longest is its track list, <= 256;
+#: bulk data travels as arrays). Judged from the container's header, before any element is read.
+MAX_GENERIC_ITEMS = 4096
 _HEADER = ("k", "o", "s", "t")  # kind, origin, seq, stamp: packed before the acks and the payload
 #: The bytes before the MAC in a signed message: the key "mac" (fixstr 3) and a bin 8 header of 32 bytes.
 _MAC_TAIL = b"\xa3mac\xc4\x20"
@@ -220,7 +224,7 @@ def _decode(data, expected_origin, key, max_bytes, kinds) -> Envelope:
         raise DecodeError("origin_mismatch", f"origin {body.o!r} on a key of {expected_origin!r}")
     schema = _PAYLOADS.get(body.k)
     if schema is None:
-        payload = _parse(_GENERIC, body.p)
+        payload = _unpack_generic(body.p)
         _check_tree(payload)
     else:
         payload = _parse(schema[0], body.p, reason=schema[1])
@@ -246,6 +250,33 @@ def _parse(decoder: msgspec.msgpack.Decoder, data, *, envelope: bool = False, re
         raise DecodeError("malformed", "a str that is not UTF-8") from None
     except RecursionError:
         raise DecodeError("malformed", "nesting too deep") from None
+
+
+def _unpack_generic(raw) -> dict:
+    """A generic payload, unpacked in C by msgpack with every list and map bounded by :data:`MAX_GENERIC_ITEMS`: a
+    longer one is ``oversize`` from its header alone (msgspec, which decodes the typed kinds, has no such bound and
+    built all 10**5 elements of a hostile list first: ~5 ms, twice per message in the agent)."""
+    try:
+        payload = msgpack.unpackb(raw, raw=False, strict_map_key=True, ext_hook=_ext_hook,
+                                  max_array_len=MAX_GENERIC_ITEMS, max_map_len=MAX_GENERIC_ITEMS)
+    except DecodeError:
+        raise
+    except (msgpack.StackError, msgpack.ExtraData, UnicodeDecodeError, RecursionError) as exc:
+        raise DecodeError("malformed", f"payload: {type(exc).__name__}") from None
+    except ValueError as exc:
+        raise DecodeError(_unpack_reason(str(exc)), f"payload: {str(exc)[:80]}") from None
+    if not isinstance(payload, dict):
+        raise DecodeError("bad_type", f"payload must be a map, got {type(payload).__name__}")
+    return payload
+
+
+def _unpack_reason(text: str) -> str:
+    """A reason from msgpack's message (e.g. "100000 exceeds max_array_len(4096)")."""
+    if "exceeds max_" in text:
+        return "oversize"
+    if "incomplete input" in text:
+        return "truncated"
+    return "bad_type" if "not allowed for map key" in text else "malformed"
 
 
 def _validation_reason(text: str) -> str:
@@ -351,7 +382,7 @@ def _check_tree(payload) -> None:
     """Depth and leaf types of a generic payload, iteratively (no recursion on hostile input). Only the kinds
     that the ground station and the simulator read are generic (:mod:`agent.net.schemas`): the agents' own
     traffic never pays this walk. The element types of a container are collected in C and only containers are
-    pushed: a 10**5-element list takes milliseconds (not the half second of an ``isinstance`` per element against
+    pushed: a list of MAX_GENERIC_ITEMS takes well under a millisecond (not a per-element ``isinstance`` against
     a type union built each time)."""
     stack = [(payload, 0)]
     while stack:
@@ -370,7 +401,7 @@ def _check_tree(payload) -> None:
 
 
 _STR = frozenset({str})
-_NODES = frozenset({dict, list, type(None), bool, int, float, str, bytes, np.ndarray})  # what msgspec, _ext_hook build
+_NODES = frozenset({dict, list, type(None), bool, int, float, str, bytes, np.ndarray})  # what msgpack, _ext_hook build
 
 
 # -- MAC ---------------------------------------------------------------------------------------------
@@ -454,6 +485,5 @@ def _decoder(schema) -> msgspec.msgpack.Decoder:
 _ENCODER = msgspec.msgpack.Encoder(enc_hook=_enc_hook)
 _BODY = msgspec.msgpack.Decoder(_Body)
 _VERSION = msgspec.msgpack.Decoder(_Version)
-#: kind -> (decoder, reason) for the typed kinds; the others decode as :data:`_GENERIC` plus :func:`_check_tree`.
+#: kind -> (decoder, reason) for the typed kinds; the others decode by :func:`_unpack_generic` and :func:`_check_tree`.
 _PAYLOADS = {k: (_decoder(s.type), s.reason) for k, s in schemas.PAYLOADS.items() if s.type is not schemas.Generic}
-_GENERIC = _decoder(schemas.Generic)

@@ -169,7 +169,8 @@ BENCHMARKS: dict[str, Benchmark] = {
             "mesh_sim.bench.fuzz",
             "issue 16: >= 1e5 fuzzed inputs per message kind (random, truncated, bit-flipped, type-confused, bad "
             "matrices, huge, nested, wrong origin, replays, far stamps) to the decoder and an agent's receive path: "
-            "crashes, hangs > 50 ms, peak memory, invalid inputs accepted",
+            "crashes, hangs > 50 ms, peak memory, invalid inputs accepted (--kinds track,grid,...: only those)",
+            options=("kinds",),
         ),
         Benchmark(
             "particles",

@@ -13,7 +13,8 @@ not dropped as a duplicate). Families (:data:`FAMILIES`):
   ``nested`` — a node replaced by lists nested 10² to 10⁵ deep (spliced in as bytes: no packer nests so deep);
 * ``origin`` — an envelope origin other than the key's; ``replay`` — the last input the agent used, again;
   ``stamp`` — the envelope stamp moved by 10³ to 10¹² s, and every ``epoch`` in the payload by 200 to 10⁹
-  steps; ``seq`` — a sequence number anywhere up to 2⁶⁴ − 1.
+  steps; ``seq`` — a sequence number moved forward by 1 to 2⁶⁴ (log-uniform: every magnitude alike), capped at
+  2⁶⁴ − 1.
 
 An input is *invalid* (:attr:`Input.invalid`) when its mutation guarantees that the agent must reject it:
 a truncated message; with a fleet key, any change of the signed bytes; a wrong origin on a peer's key; a
@@ -38,7 +39,7 @@ NEST_MARKER = "\x00nest\x00"  # a payload string replaced by deep nesting once p
 NEST_BYTES = b"\xa6" + NEST_MARKER.encode()  # ... as MessagePack packs it (a fixstr of 6 bytes)
 NEST_DEPTHS = (100, 1_000, 10_000, 100_000)
 EPOCH_SHIFT = (200, 10**9)  # an epoch moved this far is outside the tracks' window (50 steps) both ways
-SEQ_HEADROOM = 1 << 40  # a sender whose window is this close to 2**64 continues under a new name
+SEQ_HEADROOM = 1 << 40  # a sender whose window is this close to 2**64 hands over to another fleet member
 HUGE = ([0] * 100_000, "x" * 1_000_000, {f"k{i}": i for i in range(10_000)})  # what ``huge`` puts in a payload
 OTHERS = [None, True, -1, 2**63, 1.5, "x", b"\x00", [], {}, {"a": 1}, [1, "a"], np.zeros(3),
           np.zeros((2, 2), "<i4"), np.array([1.0, np.nan])]  # what a node becomes under ``type``
@@ -57,7 +58,8 @@ class Mutator:
 
     def __init__(self, case: Case, rng: np.random.Generator):
         self.case, self.rng = case, rng
-        self.seq, self.origin, self.renamed = case.next_seq, case.seed.origin, 0
+        self.names = case.senders()
+        self.seq, self.origin, self.renamed = case.next_seq, next(self.names), 0
         self.last_used: Input | None = None
         self.kinds = sorted(case.agent.kinds - {case.seed.kind})
 
@@ -71,9 +73,9 @@ class Mutator:
         if header is None:
             return
         self.seq = max(self.seq, header.seq + 1)
-        if self.seq > (1 << 64) - SEQ_HEADROOM:  # the window is spent: the same peer under another name
+        if self.seq > (1 << 64) - SEQ_HEADROOM:  # the window is spent: another member of the fleet takes over
             self.renamed += 1
-            self.origin, self.seq = f"{self.case.seed.origin}r{self.renamed}", self.case.next_seq
+            self.origin, self.seq = next(self.names, self.origin), self.case.next_seq
 
     # -- building -----------------------------------------------------------------------------------
     def fresh(self, **changes) -> wire.Envelope:
@@ -149,7 +151,9 @@ class Mutator:
         return self._input("nested", self.fresh(payload=_replaced(self.case.seed.payload, path, NEST_MARKER)), False)
 
     def _origin(self) -> Input:
-        env = self.fresh(origin=f"uav{int(self.rng.integers(2, 100))}")
+        """An envelope naming another agent than the sender whose key it arrives on (never the sender itself)."""
+        other = f"uav{int(self.rng.integers(2, 100))}"
+        env = self.fresh(origin=other if other != self.origin else "uav100")
         return self._input("origin", env, self.case.spec.kind != "truth")  # truth comes from the world, any name
 
     def _replay(self) -> Input:
@@ -166,7 +170,7 @@ class Mutator:
 
     def _seq(self) -> Input:
         env = self.fresh()
-        seq = min(env.seq + 4 * int(self.rng.integers(1 << 62)), (1 << 64) - 1)
+        seq = min(env.seq + int(2.0 ** self.rng.uniform(0, 64)), (1 << 64) - 1)
         return self._input("seq", replace(env, seq=seq), False)
 
 

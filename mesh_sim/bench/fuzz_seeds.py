@@ -20,6 +20,7 @@ import uuid
 from dataclasses import dataclass
 
 from agent.agent import Agent
+from agent.config import member_name
 from agent.net import wire
 from agent.net.bus import InMemoryBus
 from agent.net.keys import Keys
@@ -30,6 +31,9 @@ SENDER = "uav1"  # whose messages seed the inputs
 RECEIVER = "uav0"  # the agent under test
 MIN_STEPS = 25  # lockstep steps of a capture run at least (chosen here: tracks, grids and bids exist by then) ...
 MAX_STEPS = 200  # ... and at most, until every kind asked for was published (particle candidates take longest)
+#: The receiver's fleet in the fuzzed cases (uav0 .. uav255, the wire's MAX_PEERS): the capture run flies two agents,
+#: but the fuzzer's sender takes the name of another member each time it spent one's sequence numbers.
+FLEET = 256
 CLOCK_PAYLOAD = {"source": "mavlink", "offset": 0.0021, "round_trip": 0.0134}
 
 
@@ -73,6 +77,11 @@ class Case:
     fleet_key: bytes | None
     now: float
     next_seq: int
+
+    def senders(self):
+        """The names the fuzzer's sender takes in turn: the seed's origin, then the other members of the fleet."""
+        yield self.seed.origin
+        yield from sorted(self.agent.fleet - {self.seed.origin, self.agent.id}, key=lambda name: int(name[3:]))
 
     def key_for(self, origin: str) -> str:
         """Where a message of this kind from ``origin`` reaches an agent (peers may publish any kind as a belief)."""
@@ -144,5 +153,6 @@ def cases(specs: list[CaseSpec], fleet_keys: tuple[bytes | None, ...]) -> list[C
             # not the radio nor the bus (hash state, no copy): inputs go to receive() directly
             agent = copy.deepcopy(cap.agent, {id(cap.agent.radio): None, id(cap.agent.transport): None})
             agent.fleet_key = fleet_key
+            agent.fleet = frozenset(member_name(i) for i in range(FLEET))
             out.append(Case(spec, cap.seeds[spec.kind], agent, cap.keys, fleet_key, cap.now, cap.next_seq))
     return out

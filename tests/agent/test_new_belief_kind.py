@@ -92,8 +92,8 @@ def test_a_registered_belief_kind_is_exchanged_and_reported(fleet):
 def test_a_malformed_message_of_the_new_kind_is_rejected_by_reason(fleet):
     """Bad input: a "count" message whose count is a string."""
     agents, intruder, keys = fleet
-    bad = wire.Envelope(kind="count", origin="uav9", seq=1, stamp=0.0, payload={"count": "many"})
-    intruder.publish(keys.belief("count", "uav9"), wire.encode(bad, kinds=wire.KINDS | {"count"}))
+    bad = wire.Envelope(kind="count", origin="uav2", seq=1, stamp=0.0, payload={"count": "many"})
+    intruder.publish(keys.belief("count", "uav2"), wire.encode(bad, kinds=wire.KINDS | {"count"}))
     agents[0].step(0.0)
     assert agents[0].metrics()["rejected_by_reason"] == {"bad_field": 1}
     assert agents[0].exchanges["count"].largest == {}

@@ -7,6 +7,7 @@ from __future__ import annotations
 import uuid
 
 import numpy as np
+import pytest
 
 from agent.agent import Agent
 from agent.beliefs.tracks import EDGE_WAIT_S
@@ -113,3 +114,54 @@ def test_bad_resync_or_fresh_fields_are_rejected_and_change_nothing():
     agent.step(0.2 * seq)
     agent.step(0.2 * seq + EDGE_WAIT_S)  # no topology report here: the message waited for the link's place, then fused
     assert len(agent.exchanges["track"].tracker.tracks) == 1
+
+
+def test_a_message_from_an_origin_outside_the_fleet_is_rejected_before_any_state_is_kept():
+    """Bad input (skymesh bench fuzz: the receive path slowed from ~800 to ~230 inputs/s over 6,000 inputs as
+    senders under ever new names accumulated): valid track messages from ``uav2`` .. ``uav9`` (a fleet of two:
+    ``uav0``, ``uav1``) and from a name that is no agent's. Each is counted as ``unknown_origin``; no track,
+    receive window, topology entry or byte count is kept for them. The same message from ``uav1`` is used."""
+    agent, sender, keys = setup()
+    model = agent.exchanges["track"].tracker.model
+    n = model.window * model.state_dim
+    prior = Trajectory.prior(model, 0)
+    entry = {"id": 1, "belief": encode_trajectory(Trajectory(prior.y, prior.Y + np.eye(n), 0, model)),
+             "last_measured": 0.0, "acks": {}}
+    strangers = [f"uav{i}" for i in range(2, 10)] + ["intruder"]
+    for origin in strangers:
+        send(sender, keys.belief("track", origin), "track", origin, 1, {"tracks": [entry]})
+    agent.step(0.0)
+    assert agent.rejected == {"unknown_origin": len(strangers)}
+    assert agent.exchanges["track"].tracker.tracks == {} and agent.exchanges["track"].tracker.labels == {}
+    assert agent.window.metrics() == {"peer_restarts": []} and not agent.window._last
+    assert agent.topology.neighbours(0.0) == [] and not agent.bytes_rx
+    send(sender, keys.belief("track", "uav1"), "track", "uav1", 1, {"tracks": [entry]})
+    agent.step(0.2)
+    assert len(agent.exchanges["track"].tracker.tracks) == 1 and agent.rejected.total() == len(strangers)
+
+
+def test_an_agent_named_outside_its_fleet_is_refused():
+    """The fleet is ``uav0`` .. ``uav{agents-1}`` (agent.config.AgentScenario.fleet): an agent under another name
+    would have every message it sends rejected by its peers, so it is refused at construction."""
+    keys = Keys(f"rx-{uuid.uuid4().hex[:8]}")
+    with pytest.raises(ValueError, match="fleet"):
+        Agent("uav2", 2, AgentScenario(agents=2), InMemoryBus().endpoint("uav2", []), keys, seed=0)
+
+
+def test_a_message_of_many_new_tracks_costs_the_gate_once_per_track_not_once_per_pair(monkeypatch):
+    """Bad input (skymesh bench fuzz: the receive path slowed as tracks accumulated): a message adopting 64
+    tracks 50 m apart. Matching each to the local tracks and merging duplicates tested the track-to-track gate
+    pair by pair, one 3x3 solve each (~4,000 solves, ~0.25 s: a hang); the gate distances from one track to all
+    others are now one batched solve, so the solves grow with the tracks, not with their pairs."""
+    agent, sender, keys = setup()
+    model = agent.exchanges["track"].tracker.model
+    prior = Trajectory.prior(model, 0)
+    seen = np.hstack([np.eye(3), np.zeros((3, model.state_dim - 3))])
+    entries = [{"id": i, "belief": encode_trajectory(prior.update(seen, np.eye(3), np.array([50.0 * i, 0.0, 0.0]))),
+                "last_measured": 0.0, "acks": {}} for i in range(64)]
+    send(sender, keys.belief("track", "uav1"), "track", "uav1", 1, {"tracks": entries})
+    solves, solve = [], np.linalg.solve
+    monkeypatch.setattr(np.linalg, "solve", lambda *args: solves.append(1) or solve(*args))
+    agent.step(0.0)
+    assert len(agent.exchanges["track"].tracker.tracks) == 64 and not agent.rejected
+    assert len(solves) <= 3 * 64

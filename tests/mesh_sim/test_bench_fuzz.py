@@ -10,8 +10,9 @@ import time
 import numpy as np
 import pytest
 
+from agent.net import wire
 from mesh_sim.bench import fuzz, fuzz_seeds
-from mesh_sim.bench.fuzz_mutate import FAMILIES
+from mesh_sim.bench.fuzz_mutate import FAMILIES, Mutator
 
 BUDGET = 2 * len(FAMILIES)  # every family twice
 
@@ -31,6 +32,14 @@ def test_a_tiny_run_covers_every_kind_twice_and_finds_nothing(tmp_path):
     path = tmp_path / "fuzz.json"
     path.write_text(json.dumps(result))
     assert json.loads(path.read_text())["benchmark"] == "fuzz"
+
+
+def test_kinds_fuzzes_only_the_kinds_named_and_refuses_unknown_ones():
+    result = fuzz.run(quick=True, inputs=(len(FAMILIES), len(FAMILIES)), kinds=("clock",))
+    assert [(r["kind"], r["keyed"]) for r in result["rows"]] == [("clock", False), ("clock", True)]
+    assert result["settings"]["kinds"] == ["clock"]
+    with pytest.raises(ValueError, match="unknown fuzz kinds"):
+        fuzz.run(quick=True, kinds=("clock", "nope"))
 
 
 @pytest.fixture(scope="module")
@@ -56,8 +65,10 @@ class Planted(fuzz.AgentTarget):
             return super().receive(inp)
         if self.fault == "crash":
             raise RuntimeError("planted")
-        if self.fault == "hang":
-            time.sleep(1.2 * fuzz.HANG_S)
+        if self.fault == "hang":  # busy: hangs are judged on CPU time
+            end = time.thread_time() + 1.2 * fuzz.HANG_S
+            while time.thread_time() < end:
+                pass
             return super().receive(inp)
         self.planted += 1
         self.agent.topology.heard(f"intruder{self.planted}", self.case.now)  # "accepted": a change, uncounted
@@ -82,3 +93,12 @@ def test_each_detector_fires_on_a_planted_fault(track_cases, i, fault, family):
     else:
         assert result["accepted_invalid_by_family"] == {family: planted}
         assert len(result["accepted_invalid_examples"]) == planted
+
+
+def test_a_wrong_origin_is_never_the_senders_own_name(track_cases):
+    """The fuzzer's sender takes other fleet members' names (uav2, ...) once it spent a sequence window: a "wrong
+    origin" drawn from uav2 .. uav99 was once its own name, a valid message counted as an accepted invalid one."""
+    mutator = Mutator(track_cases[0], np.random.default_rng(0))
+    mutator.origin = "uav7"
+    origins = {wire.peek_header(mutator.make("origin").data).origin for _ in range(500)}
+    assert "uav7" not in origins and len(origins) > 50
