@@ -10,12 +10,10 @@ the link budget here; the planner turns the exchanges' views into a goal for the
 It knows nothing of clocks or processes: the live harness (``agent.runtime``) calls it on the wall clock over Zenoh,
 the lockstep harness over an in-memory bus (with a radio plan wrapped in :class:`agent.net.radio.RadioTransport`).
 
-Every received message is decoded and validated (``agent.net.wire``) before it touches a belief; a
-rejected message is counted by reason and logged once per (peer, reason). A message whose key names an origin
-outside the fleet (:attr:`agent.config.AgentScenario.fleet`) is rejected first (``unknown_origin``), so the
-state kept per peer is bounded by the fleet. Duplicates and messages older
-than the last one from the same origin are dropped by ``(origin, kind, seq)``; a peer's new incarnation (a
-restart, :mod:`agent.net.incarnation`) resets what the exchanges assumed they shared with it.
+Every received message is decoded and validated (``agent.net.wire``) before it touches a belief, from fleet members
+only (``unknown_origin`` first: per-peer state is bounded by the fleet); a rejected message is counted by reason and
+logged once per (peer, reason). Duplicates, replays and stale stamps are dropped by ``(origin, kind, seq)`` and time;
+a peer's new incarnation (:mod:`agent.net.incarnation`) resets what the exchanges assumed they shared with it.
 """
 
 from __future__ import annotations
@@ -50,9 +48,7 @@ class Agent:
     def __init__(self, agent_id: str, index: int, scenario: AgentScenario, transport, keys: Keys,
                  seed: int, fleet_key: bytes | None = None, camera=None, lockstep: bool = False, incarnation: int = 0):
         self.id, self.index, self.scenario, self.keys, self.fleet_key = agent_id, index, scenario, keys, fleet_key
-        self.fleet = scenario.fleet
-        if agent_id not in self.fleet:  # its peers would reject every message it sends (unknown_origin)
-            raise ValueError(f"agent id {agent_id!r} is not a member of the fleet ({', '.join(sorted(self.fleet))})")
+        self.fleet = scenario.fleet_of(agent_id)
         self.terrain = terrain_from_config(scenario.terrain)
         self.vehicle = vehicle_from_config(scenario.vehicle, scenario.start_position(index), 0.0, scenario.origin)
         self.sensor = sensor_from_config(scenario.sensor, seed, self.terrain, camera)
@@ -169,8 +165,7 @@ class Agent:
         exchange = self.exchanges.get(env.kind)
         if exchange is not None:
             edge = self.topology.edge(env.origin, t)
-            self.fusions.record(env.origin, t, exchange.receive(env.origin, env.seq, env.stamp, env.payload,
-                                                                edge, t))
+            self.fusions.record(env.origin, t, exchange.receive(env.origin, env.seq, env.stamp, env.payload, edge, t))
 
     def _reject(self, peer: str, reason: str, log_it: bool = True) -> None:
         self.rejected[reason] += 1
@@ -189,8 +184,7 @@ class Agent:
         self.bytes_tx[kind] += len(data)
 
     def to_simulator(self, kind: str, t: float, payload: dict) -> None:
-        """Simulation-only data for the centralized references (:class:`agent.plugins.Outbox`): not radio
-        traffic, counted apart."""
+        """Simulation-only data for the centralized references (:class:`agent.plugins.Outbox`): not radio traffic."""
         _, data = self._seal(kind, t, payload)
         self.transport.publish(self.keys.sim(f"{kind}/{self.id}"), data)
         self.sim_bytes_tx[kind] += len(data)
@@ -233,8 +227,7 @@ class Agent:
         sensor = self.sensor.metrics()
         drops = Counter() if self.radio is None else self.radio.drops
         out = {
-            "id": self.id,
-            "steps": self.steps,
+            "id": self.id, "steps": self.steps,
             "bytes_tx": int(sum(self.bytes_tx.values())), "bytes_rx": int(sum(self.bytes_rx.values())),
             "bytes_tx_by_kind": dict(self.bytes_tx), "sim_bytes_tx_by_kind": dict(self.sim_bytes_tx),
             "bytes_rx_by_peer": _by_peer(self.bytes_rx),

@@ -89,6 +89,13 @@ class AgentScenario:
         per peer is bounded by the fleet, not by the names a sender can make up."""
         return frozenset(member_name(i) for i in range(self.agents))
 
+    def fleet_of(self, agent_id: str) -> frozenset[str]:
+        """:attr:`fleet`, once ``agent_id`` is known to be in it: a ``ValueError`` otherwise (its peers would reject
+        every message it sends as ``unknown_origin``)."""
+        if agent_id not in self.fleet:
+            raise ValueError(f"agent id {agent_id!r} is not a member of the fleet ({', '.join(sorted(self.fleet))})")
+        return self.fleet
+
     def start_position(self, index: int) -> np.ndarray:
         """Agents start spread along the southern edge of the area, at flight altitude."""
         (n0, _), (e0, e1) = self.area.north, self.area.east
