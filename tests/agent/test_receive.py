@@ -137,6 +137,7 @@ def test_a_message_from_an_origin_outside_the_fleet_is_rejected_before_any_state
     assert agent.topology.neighbours(0.0) == [] and not agent.bytes_rx
     send(sender, keys.belief("track", "uav1"), "track", "uav1", 1, {"tracks": [entry]})
     agent.step(0.2)
+    agent.step(0.2 + EDGE_WAIT_S)  # no topology report here: the message waited for the link's place, then fused
     assert len(agent.exchanges["track"].tracker.tracks) == 1 and agent.rejected.total() == len(strangers)
 
 
