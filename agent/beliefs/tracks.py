@@ -75,7 +75,7 @@ class TrackExchange:
         self.me = me
         self.topology = topology  # agent.net.topology.Topology: asked again for the links of waiting messages
         self.fusions = fusions  # agent.fusion_log.FusionLog: where the fusions of waiting messages are recorded
-        self.waiting: list[tuple] = []  # (since, origin, seq, stamp, remote tracks): hybrid, link not known yet
+        self.waiting: dict[str, tuple] = {}  # origin -> (since, seq, stamp, remote tracks): hybrid, link not known
         self.tracker = Tracker(config, step, terrain, seed=seed + 104729, me=me)
         self.sender = sender
         self.outbox = outbox
@@ -106,16 +106,14 @@ class TrackExchange:
         return bearings
 
     def settle(self, t: float) -> None:
-        """Fuse the waiting messages (in arrival order) whose link is now known, or that waited
-        :data:`EDGE_WAIT_S`: the latter as before, by intersection."""
-        still = []
-        for since, origin, seq, stamp, remote in self.waiting:
+        """Fuse the waiting messages whose link is now known, or that waited :data:`EDGE_WAIT_S`: the latter as
+        before, by intersection."""
+        for origin, (since, seq, stamp, remote) in list(self.waiting.items()):
             edge = self.topology.edge(origin, t)
             if edge is Edge.UNKNOWN and t - since < EDGE_WAIT_S - 1e-9:
-                still.append((since, origin, seq, stamp, remote))
                 continue
+            del self.waiting[origin]
             self.fusions.record(origin, t, self._fuse(origin, seq, stamp, remote, edge, t))
-        self.waiting = still
 
     def _usable(self, bearings: list[Bearing]) -> list[Bearing]:
         """Bearings the trajectory window can still take (a camera that waited for a late pose may hand
@@ -166,7 +164,10 @@ class TrackExchange:
         if any(r.belief.epoch < self.tracker.epoch - PAST_EPOCHS for r in remote):
             raise wire.DecodeError("past_epoch", f"a track more than {PAST_EPOCHS} steps behind ours")
         if edge is Edge.UNKNOWN and self.tracker.config.policy == "hybrid" and self.topology is not None:
-            self.waiting.append((t, origin, seq, stamp, remote))
+            # one message per origin waits, the newest: it carries all its sender holds (an older one is as if
+            # lost, which the acknowledgements cover), so the wait is bounded by the fleet
+            since = self.waiting.get(origin, (t,))[0]
+            self.waiting[origin] = (since, seq, stamp, remote)
             return []
         return self._fuse(origin, seq, stamp, remote, edge, t)
 
@@ -179,7 +180,7 @@ class TrackExchange:
     def peer_restarted(self, peer: str) -> None:
         """A restarted peer: see :meth:`agent.beliefs.tracking.Tracker.peer_restarted` (its waiting messages
         belong to its old life)."""
-        self.waiting = [w for w in self.waiting if w[1] != peer]
+        self.waiting.pop(peer, None)
         self.tracker.peer_restarted(peer)
 
     def _decode(self, payload: dict) -> list[RemoteTrack]:

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from agent.agent import Agent
-from agent.beliefs.tracks import EDGE_WAIT_S
 from agent.config import AgentScenario
 from agent.net import wire
 from agent.net.bus import InMemoryBus
@@ -22,9 +21,15 @@ from fusion.trajectory import Trajectory
 def setup():
     keys = Keys(f"rx-{uuid.uuid4().hex[:8]}")
     bus = InMemoryBus()
-    subscribe = [f"{keys.root}/belief/**", keys.telemetry("*"), keys.sim("truth")]
+    subscribe = [f"{keys.root}/belief/**", keys.topology("*"), keys.telemetry("*"), keys.sim("truth")]
     agent = Agent("uav0", 0, AgentScenario(agents=2), bus.endpoint("uav0", subscribe), keys, seed=0)
     return agent, bus.endpoint("sender", []), keys
+
+
+def introduce(endpoint, keys: Keys, t: float = 0.0) -> None:
+    """uav1's topology report, as a real peer sends it: it hears uav0 only, so the link is a bridge and a hybrid
+    track from uav1 is fused on arrival (an unknown link's message waits: agent.beliefs.tracks.EDGE_WAIT_S)."""
+    send(endpoint, keys.topology("uav1"), "topology", "uav1", 1, {"reports": {"uav1": [t, ["uav0"]]}}, stamp=t)
 
 
 def send(endpoint, key: str, kind: str, origin: str, seq: int, payload: dict, stamp: float = 0.0) -> None:
@@ -109,10 +114,10 @@ def test_bad_resync_or_fresh_fields_are_rejected_and_change_nothing():
         assert agent.rejected.total() == seq and set(agent.rejected) <= {"bad_field", "bad_type"}, extra
         assert agent.exchanges["track"].tracker.tracks == {}, extra
     seq = len(bad) + 1
+    introduce(sender, keys, 0.2 * seq)
     send(sender, keys.belief("track", "uav1"), "track", "uav1", seq, {"tracks": [
         {"id": 1, "belief": belief, "last_measured": 0.0, "acks": {}, "resync": {"uav0": 0}, "fresh": 2}]})
     agent.step(0.2 * seq)
-    agent.step(0.2 * seq + EDGE_WAIT_S)  # no topology report here: the message waited for the link's place, then fused
     assert len(agent.exchanges["track"].tracker.tracks) == 1
 
 
@@ -135,9 +140,9 @@ def test_a_message_from_an_origin_outside_the_fleet_is_rejected_before_any_state
     assert agent.exchanges["track"].tracker.tracks == {} and agent.exchanges["track"].tracker.labels == {}
     assert agent.window.metrics() == {"peer_restarts": []} and not agent.window._last
     assert agent.topology.neighbours(0.0) == [] and not agent.bytes_rx
+    introduce(sender, keys, 0.2)
     send(sender, keys.belief("track", "uav1"), "track", "uav1", 1, {"tracks": [entry]})
     agent.step(0.2)
-    agent.step(0.2 + EDGE_WAIT_S)  # no topology report here: the message waited for the link's place, then fused
     assert len(agent.exchanges["track"].tracker.tracks) == 1 and agent.rejected.total() == len(strangers)
 
 
@@ -160,6 +165,7 @@ def test_a_message_of_many_new_tracks_costs_the_gate_once_per_track_not_once_per
     seen = np.hstack([np.eye(3), np.zeros((3, model.state_dim - 3))])
     entries = [{"id": i, "belief": encode_trajectory(prior.update(seen, np.eye(3), np.array([50.0 * i, 0.0, 0.0]))),
                 "last_measured": 0.0, "acks": {}} for i in range(64)]
+    introduce(sender, keys)
     send(sender, keys.belief("track", "uav1"), "track", "uav1", 1, {"tracks": entries})
     solves, solve = [], np.linalg.solve
     monkeypatch.setattr(np.linalg, "solve", lambda *args: solves.append(1) or solve(*args))

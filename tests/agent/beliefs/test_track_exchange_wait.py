@@ -90,6 +90,19 @@ def test_a_message_that_waited_edge_wait_s_is_intersected_as_before():
     assert not uav1.waiting and len(uav1.tracker.tracks) == 1
 
 
+def test_only_the_newest_message_of_an_origin_waits():
+    """Bad input as much as normal traffic: message after message from a peer whose link stays unknown. One waits
+    per origin, the newest, from the time the first arrived: the wait is bounded by the fleet."""
+    t, payload = a_message_from_uav0()
+    uav1, topology, fusions = receiver()
+    topology.heard("uav0", t)
+    for seq in range(1, 40):
+        uav1.receive("uav0", seq, t, payload, Edge.UNKNOWN, t + 0.02 * seq)
+    assert list(uav1.waiting) == ["uav0"] and uav1.waiting["uav0"][:2] == (t + 0.02, 39)
+    uav1.settle(t + 0.02 + EDGE_WAIT_S)
+    assert dict(fusions.by_method) == {"ci": 1} and not uav1.waiting
+
+
 def test_a_known_link_is_fused_on_arrival_and_a_restart_drops_what_waited():
     t, payload = a_message_from_uav0()
     uav1, topology, fusions = receiver()
