@@ -6,8 +6,8 @@
   ``D(N(mu, P) || N(F mu_s, F P_s F^T + Q))`` (:func:`divergence`) — or when it has not been sent for
   ``max_silence`` seconds (so that peers' copies and acknowledgements stay fresh), or was never sent.
   This is variance-based event triggering (Trimpe & D'Andrea, "Event-based state estimation with
-  variance-based triggering", IEEE TAC 59(12), 2014) with the divergence as the measure, the expected
-  information gain of Merino (2.30)-(2.33) evaluated at the receiver. The entropy difference
+  variance-based triggering", IEEE TAC 59(12), 2014) with the divergence as the measure: Merino's
+  entropy-based trigger (2.30)-(2.33), measured at the receiver rather than the sender. The entropy difference
   ``1/2 log det Y_now - 1/2 log det Y_sent`` it replaces is ~0 for a track in steady state — new
   bearings only replace the process noise — so such tracks waited ``max_silence`` while the receivers'
   predictions went stale (issue 16: hybrid at 1.4x the in-flight oracle on a 4-agent line).
@@ -63,9 +63,9 @@ class Every:
 def divergence(now: Gaussian, sent_mean: np.ndarray, sent_cov: np.ndarray, motion, dt: float) -> float:
     """``D(N(mu, P) || N(m, S))`` in nats, ``m = F mu_s``, ``S = F P_s F^T + Q`` the last-sent belief
     ``(mu_s, P_s)`` predicted ``dt`` seconds with ``motion`` (its ``transition`` and ``noise``):
-    ``1/2 [tr(S^-1 P) + (mu - m)^T S^-1 (mu - m) - n + ln det S - ln det P]`` (Cover & Thomas, Elements of
-    Information Theory, 2nd ed., Eq. 8.80 for the entropy terms; the Gaussian KL divergence). A current
-    estimate with an unobserved direction has no divergence: 0 (only silence or a first send sends it)."""
+    ``1/2 [tr(S^-1 P) + (mu - m)^T S^-1 (mu - m) - n + ln det S - ln det P]``, the closed-form
+    Kullback–Leibler divergence of two multivariate Gaussians. A current estimate with an unobserved
+    direction has no divergence: 0 (only silence or a first send sends it)."""
     try:
         mu, P = now.mean, now.cov
     except UninformativeBeliefError:
