@@ -5,9 +5,9 @@ The plug-in (:class:`agent.plugins.BeliefExchange`) around :class:`agent.beliefs
 * **absorb**: the step's bearings that the trajectory window can still take are associated and applied
   (Merino (3.52)/(3.64)); the others are counted as ``bearing_outside_window``, never applied. The raw
   bearings also go to the simulator's centralized oracle (simulation only, not radio traffic);
-* **outgoing**: every ``[sending] period`` the confirmed tracks that gained ``info_gain`` nats, or were
-  silent for ``max_silence`` (:mod:`agent.net.sending`), each charged to the link budget; each entry carries
-  the per-track acknowledgement of the peer's last copy fused here;
+* **outgoing**: every ``[sending] period`` the confirmed tracks of which a receiver's prediction lacks
+  ``info_gain`` nats, or that were silent for ``max_silence`` (:mod:`agent.net.sending`), each charged to the
+  link budget; each entry carries the per-track acknowledgement of the peer's last copy fused here;
 * **receive**: decode every track (:mod:`agent.net.wire`), reject a track that is not observable or is
   stamped more than :data:`FUTURE_EPOCHS` steps ahead of ours or :data:`PAST_EPOCHS` behind (a clock
   fault), fuse through the per-track channel filters (exact on tree edges, intersection elsewhere;
