@@ -29,6 +29,7 @@ but by no agent in a window fails it; one that neither saw is left out.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -101,7 +102,13 @@ def independent_samples(target_lists: list[list[dict]], t0: float, t1: float) ->
         for t in targets:
             seconds = BIN_S * sum(1 for start, *sums in t.get("bins", []) if t0 - 1e-9 <= start < t1 - 1e-9 and sums[2])
             longest[t["target"]] = max(longest.get(t["target"], 0.0), seconds)
-    return sum(max(1, int(s // DECORRELATION_S + 1e-9)) for s in longest.values() if s > 0)
+    return independent_count(longest.values())
+
+
+def independent_count(tracked_seconds: Iterable[float]) -> int:
+    """One independent NEES sample per :data:`DECORRELATION_S` of each target's tracked seconds, at least one per
+    tracked target: the rule shared by the phases and ``skymesh bench rumor`` (:mod:`mesh_sim.bench.rumor_stats`)."""
+    return sum(max(1, int(s // DECORRELATION_S + 1e-9)) for s in tracked_seconds if s > 0)
 
 
 def _rmse(sums: np.ndarray) -> float | None:

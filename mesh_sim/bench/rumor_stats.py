@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-from mesh_sim.phases import CONFIDENCE, DECORRELATION_S, anees_interval
+from mesh_sim.phases import CONFIDENCE, DECORRELATION_S, anees_interval, independent_count  # noqa: F401 (re-exported)
 from mesh_sim.results import pooled
 
 ANEES_FLOOR = 0.5  # issue 11: an agent's ANEES below this is wastefully conservative
@@ -45,7 +45,7 @@ GOAL_METHODS = ("hybrid", "flood")  # the methods whose every agent must be cons
 
 def independent_samples(per_target_samples: dict, step: float) -> int:
     """One per target per ``DECORRELATION_S`` of tracked time (at least one per tracked target)."""
-    return sum(max(1, int(n * step // DECORRELATION_S)) for n in per_target_samples.values() if n > 0)
+    return independent_count(n * step for n in per_target_samples.values())
 
 
 def _longest(target_lists: list[list[dict]]) -> dict[str, int]:
