@@ -190,7 +190,10 @@ def _bench(args) -> int:
               "an option of this benchmark"
               + (f" (only of: {takes})" if takes else ""), file=sys.stderr)
         return EXIT_USAGE
-    result = bench.run(quick=args.quick, repeats=args.repeats, **options)
+    try:
+        result = bench.run(quick=args.quick, repeats=args.repeats, **options)
+    except ValueError as err:  # an option's value the benchmark refuses (e.g. --kinds naming no message kind)
+        return usage_error(f"skymesh bench {args.name}", err)
     bench.report(result, console)
     if args.json is not None:
         try:

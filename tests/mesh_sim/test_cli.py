@@ -113,6 +113,13 @@ def test_scale_options_are_refused_by_other_benchmarks(monkeypatch, capsys):
     assert "--seeds is not an option of this benchmark (only of: fire)" in capsys.readouterr().err
 
 
+def test_a_value_the_benchmark_refuses_exits_2_with_one_line(capsys):
+    """Bad input: ``--kinds nope`` names no message kind of the fuzz benchmark (it was a traceback)."""
+    assert cli.main(["bench", "fuzz", "--quick", "--kinds", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown fuzz kinds ['nope']; known: track" in err and "Traceback" not in err
+
+
 def test_the_seeds_option_reaches_the_fire_benchmark(monkeypatch):
     from mesh_sim.bench import fire
 
