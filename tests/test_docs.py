@@ -176,7 +176,12 @@ def test_every_gallery_script_has_an_expectation_and_an_index_line():
     assert all(f"(gallery/{name})" in index for name in scripts), "docs/README.md must link every gallery script"
 
 
-@pytest.mark.parametrize("name", sorted(GALLERY_EXPECTS))
+#: Scripts that run a whole team (a lockstep run): slow, like the golden lockstep runs.
+SLOW_SCRIPTS = frozenset({"lockstep_run_and_metrics.py"})
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.slow] if n in SLOW_SCRIPTS else [])
+                                  for n in sorted(GALLERY_EXPECTS)])
 def test_gallery_script_runs_and_prints_its_result(name):
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     done = subprocess.run([sys.executable, str(GALLERY / name)], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
