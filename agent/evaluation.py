@@ -3,7 +3,7 @@
 At each evaluation the target is matched to the estimate nearest to it in Mahalanobis distance over
 position, accepted if ``d^2`` is inside ``gate`` (chi-square(3) 99.9 % by default). NEES is the full
 6-D ``(x - mu)^T P^-1 (x - mu)``; ``anees`` is its average divided by the state dimension, so 1.0 is
-perfectly consistent (Bar-Shalom et al., *Estimation with Applications to Tracking*, §5.4).
+perfectly consistent (Bar-Shalom et al., *Estimation with Applications to Tracking and Navigation*, 2001, §5.4).
 
 Each target's summary also has a ``tail``: the same figures over the last ``tail_s`` seconds before the
 newest evaluation only, e.g. to see estimates re-converge after a partition heals, which the whole-run
