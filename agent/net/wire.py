@@ -46,7 +46,7 @@ import msgpack
 import msgspec
 import numpy as np
 
-from agent.net import schemas
+from agent.net import roster, schemas
 
 SCHEMA_VERSION = 1
 
@@ -83,6 +83,7 @@ REASONS: frozenset[str] = frozenset(
         "uninformative",  # a track whose newest state is not observable (agent.beliefs.tracks)
         "past_epoch",  # a track stamped too far behind the receiver's clock (agent.beliefs.tracks)
         "bad_truth",  # malformed target states or UAV positions in the world's truth (agent.sensors.truth)
+        "unknown_name",  # a name in the acks or the payload outside the fleet's roster (agent.net.roster)
     }
 )
 
@@ -181,17 +182,22 @@ def decode(
     key: bytes | None = None,
     max_bytes: int = MAX_MESSAGE_BYTES,
     kinds: Set[str] | None = None,
+    fleet: Set[str] | None = None,
 ) -> Envelope:
     """Validate and unpack one message. Raises only :class:`DecodeError`, whatever ``data`` holds.
 
     Order of checks: size, MAC (with a key, on the raw bytes before anything is parsed), envelope
-    structure, version, field set, field types and ranges, kind, origin, payload schema. (A ``key`` that
+    structure, version, field set, field types and ranges, kind, origin, payload schema and, given the ``fleet``'s
+    names, every agent a typed payload names (:mod:`agent.net.roster`). (A ``key`` that
     is not non-empty bytes is a configuration error and raises ``ValueError`` before ``data`` is looked
     at.)"""
     if key is not None:
         _check_key(key)
     try:
-        return _decode(data, expected_origin, key, max_bytes, KINDS if kinds is None else kinds)
+        envelope = _decode(data, expected_origin, key, max_bytes, KINDS if kinds is None else kinds)
+        if fleet is not None and (names := roster.strangers(envelope.kind, envelope.acks, envelope.payload, fleet)):
+            raise DecodeError("unknown_name", f"names outside the fleet: {', '.join(n[:64] for n in names[:4])}")
+        return envelope
     except DecodeError:
         raise
     except Exception as exc:  # a safety net: the agent must never crash on input (DESIGN.md §5)

@@ -172,3 +172,18 @@ def test_a_message_of_many_new_tracks_costs_the_gate_once_per_track_not_once_per
     agent.step(0.0)
     assert len(agent.exchanges["track"].tracker.tracks) == 64 and not agent.rejected
     assert len(solves) <= 3 * 64
+
+
+def test_a_member_naming_an_agent_outside_the_fleet_is_rejected_and_its_report_is_not_kept():
+    """Bad input: uav1's topology report (a fleet of two) naming ``uav9`` as its neighbour, then a report from
+    ``uav1`` about ``ghost``. Each is ``unknown_name`` (agent.net.roster), the topology graph keeps no node of
+    theirs and the receive window does not move; uav1's next, valid report is used."""
+    agent, sender, keys = setup()
+    send(sender, keys.topology("uav1"), "topology", "uav1", 1, {"reports": {"uav1": [0.0, ["uav0", "uav9"]]}})
+    send(sender, keys.topology("uav1"), "topology", "uav1", 2, {"reports": {"ghost": [0.0, ["uav1"]]}})
+    agent.step(0.0)
+    assert agent.rejected == {"unknown_name": 2}
+    assert agent.topology.neighbours_of("uav1", 0.0) == frozenset() and not agent.window._last
+    introduce(sender, keys, 0.2)
+    agent.step(0.2)
+    assert agent.topology.neighbours_of("uav1", 0.2) == {"uav0"} and agent.rejected.total() == 2
