@@ -122,10 +122,21 @@ def test_reconvergence_after_a_merge_uses_the_window_after_the_event():
     when the last bad bin has left: re-converged 8 s after the merge."""
     fleet = [_target("car", [[float(k), 9.0 if 10 <= k < 13 else 1.0, 6.0, 1] for k in range(25)])]
     oracle = [_target("car", [[float(k), 1.0, 6.0, 1] for k in range(25)])]
-    after = phases.reconvergence([fleet], oracle, 10.0, 25.0)
+    after = phases.reconvergence([fleet], [oracle], 10.0, 25.0)
     assert after == 8.0
-    assert phases.reconvergence([fleet], [_target("car", [[float(k), 0.5, 6.0, 1] for k in range(25)])],
+    assert phases.reconvergence([fleet], [[_target("car", [[float(k), 0.5, 6.0, 1] for k in range(25)])]],
                                 10.0, 25.0) is None  # sqrt(1 / 0.5) = 1.41 for good
+
+
+def test_reconvergence_to_the_in_flight_oracles_pools_them_like_the_fleet():
+    """Two agents whose errors (squared 4 and 1 per bin) equal their own in-flight oracles' from the merge on:
+    re-converged to them at the first bin (pooled 2.5 ÷ 2.5), though the fleet stays sqrt(2.5 / 1) = 1.58x the
+    oracle (squared error 1) for good."""
+    bins = lambda err: [_target("car", [[float(k), err, 6.0, 1] for k in range(25)])]  # noqa: E731
+    agents, in_flight = [bins(4.0), bins(1.0)], [bins(4.0), bins(1.0)]
+    assert phases.reconvergence(agents, in_flight, 10.0, 25.0) == 1.0
+    assert phases.reconvergence(agents, [bins(1.0)], 10.0, 25.0) is None
+    assert phases.worst_ratio(agents, [bins(1.0)], 10.0, 15.0) == pytest.approx(np.sqrt(2.5))
 
 
 @pytest.mark.slow
@@ -134,7 +145,7 @@ def test_a_lockstep_partition_run_reports_three_phases(tmp_path):
     got = [(p["name"], p["start_s"], p["end_s"]) for p in metrics["phases"]]
     assert got == [("start", 0.0, 15.0), ("partition", 15.0, 30.0), ("merge", 30.0, 33.0)]
     assert all(p["samples"] > 0 and p["fleet_rmse"] > 0 and p["oracle_rmse"] > 0 for p in metrics["phases"])
-    assert "reconverged_after_s" in metrics["phases"][2]
+    assert {"reconverged_after_s", "reconverged_to_in_flight_after_s"} <= metrics["phases"][2].keys()
     # hybrid on a tree is exact up to what is still in flight, in every phase (with the old entropy trigger the
     # tracks waited max_silence in steady state: 1.3-1.5x in every phase)
     assert all(p["rmse_ratio_to_in_flight"] < 1.15 for p in metrics["phases"]), metrics["phases"]
