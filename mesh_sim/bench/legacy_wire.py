@@ -48,12 +48,15 @@ def decode(
     key: bytes | None = None,
     max_bytes: int = MAX_MESSAGE_BYTES,
     kinds: Set[str] | None = None,
+    fleet: Set[str] | None = None,
 ) -> Envelope:
     """Validate and unpack one message. Raises only :class:`DecodeError`, whatever ``data`` holds.
 
     Order of checks: size, msgpack structure, MAC (with a key, before any field is interpreted),
     version, field set, field types and ranges, kind, origin, payload tree. (A ``key`` that is not
-    non-empty bytes is a configuration error and raises ``ValueError`` before ``data`` is looked at.)"""
+    non-empty bytes is a configuration error and raises ``ValueError`` before ``data`` is looked at.)
+    ``fleet`` is taken as :func:`agent.net.wire.decode` takes it, so the agent can call either, and ignored:
+    the v1 decoder did not judge the names inside a message (:mod:`agent.net.roster` came later)."""
     if key is not None:
         _check_key(key)
     try:

@@ -94,8 +94,10 @@ def test_a_flood_is_dropped_unparsed_and_the_setpoint_stream_keeps_its_rate(flyi
     flooder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     start = time.monotonic()
     sent = 0
-    try:  # bad input: ~50 000 valid ATTITUDE datagrams a second for 1.5 s, 25 times max_message_rate
-        while time.monotonic() - start < 1.5:
+    # bad input: ~50 000 valid ATTITUDE datagrams a second for 1.5 s, 25 times max_message_rate (on a loaded
+    # machine the sender may not reach the rate at first: it goes on, up to 10 s, until the bucket has overflowed)
+    try:
+        while time.monotonic() - start < 1.5 or (not vehicle.rejected["flood"] and time.monotonic() - start < 10):
             for _ in range(500):
                 flooder.sendto(frame, peer.address)
             sent += 500
@@ -105,7 +107,7 @@ def test_a_flood_is_dropped_unparsed_and_the_setpoint_stream_keeps_its_rate(flyi
     end = time.monotonic()
     assert vehicle.rejected["flood"] > 0
     parsed = vehicle.link.received["ATTITUDE"]
-    assert parsed < 2000 * 1.5 + 2000 + 100  # the token bucket: a second's burst, then max_message_rate
+    assert parsed < 2000 * (end - start) + 2000 + 100  # the token bucket: a second's burst, then max_message_rate
     during = [t for t, _ in peer.received["SET_POSITION_TARGET_LOCAL_NED"] if start <= t <= end]
     assert len(during) / (end - start) >= 5.0  # the stream kept its rate through the flood
     still_fine(peer, vehicle)
