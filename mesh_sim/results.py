@@ -1,4 +1,5 @@
-"""Merge a run's per-process metrics into ``metrics.json``, print the summary table, draw the plots.
+"""Merge a run's per-process metrics into ``metrics.json``, print the summary table, draw the plots
+(:mod:`mesh_sim.plots`).
 
 Fleet figures pool every (agent, target) pair by samples: ``rmse = sqrt(sum n_i rmse_i^2 / sum n_i)``
 and ``anees = sum n_i anees_i / sum n_i``, likewise for the oracle, so ``rmse_ratio_to_oracle`` compares
@@ -21,8 +22,9 @@ from rich.console import Console, Group
 from rich.markup import escape
 from rich.table import Table
 
-from agent.runtime import atomic_file, write_json
+from agent.runtime import write_json
 from mesh_sim.phases import anees_interval, caption, independent_samples, ratio_of, run_phases
+from mesh_sim.plots import draw_run_plots
 
 
 def pooled(targets: list[dict]) -> tuple[float | None, float | None]:
@@ -116,8 +118,7 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
         metrics["fleet"]["grid"] = grid_fleet(agents, oracle["grid"], sc)
     write_json(run_dir / "metrics.json", metrics)
     try:
-        plot(metrics, run_dir / "plots")
-        plot_fire_maps(run_dir / "fire_maps.npz", run_dir / "plots")
+        draw_run_plots(metrics, run_dir)
     except (OSError, ValueError) as err:  # a plot is a convenience; the metrics are already written
         Console(stderr=True).print(f"[yellow]plots skipped: {err}")
     return metrics
@@ -314,62 +315,3 @@ def _drops(by_cause: dict) -> str:
     """``12 (loss 9, rate 3)``: radio drops and their causes."""
     total = sum(by_cause.values())
     return f"{total} ({', '.join(f'{k} {v}' for k, v in sorted(by_cause.items()))})" if total else "0"
-
-
-def plot(metrics: dict, folder: Path) -> None:
-    """Per-target RMSE of every agent beside the oracle's (``plots/rmse.png``)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    folder.mkdir(exist_ok=True)
-    targets = sorted({t["target"] for a in metrics["agents"] for t in a.get("targets", [])})
-    if not targets:
-        return
-    series = {a["id"]: {t["target"]: t["rmse"] for t in a.get("targets", [])} for a in metrics["agents"]}
-    series["oracle"] = {t["target"]: t["rmse"] for t in metrics["oracle"].get("targets", [])}
-    fig, ax = plt.subplots(figsize=(7, 4))
-    width = 0.8 / len(series)
-    for k, (name, values) in enumerate(series.items()):
-        xs = np.arange(len(targets)) + k * width
-        ax.bar(xs, [values.get(t) or 0.0 for t in targets], width, label=name)
-    ax.set_xticks(np.arange(len(targets)) + 0.4 - width / 2, targets)
-    ax.set_ylabel("position RMSE [m]")
-    ax.legend(fontsize="small", ncols=2)
-    fig.tight_layout()
-    with atomic_file(folder / "rmse.png", "wb") as f:
-        fig.savefig(f, format="png", dpi=100)
-    plt.close(fig)
-
-
-def plot_fire_maps(maps_file: Path, folder: Path) -> None:
-    """The true fire beside the centralized map and every agent's (``plots/fire_maps.png``)."""
-    if not maps_file.is_file():
-        return
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    maps = np.load(maps_file)
-    panels = [(k, maps[k]) for k in ("central", *sorted(k for k in maps.files if k.startswith("agent_")))]
-    fig, axes = plt.subplots(1, len(panels) + ("truth" in maps.files), figsize=(3.2 * (len(panels) + 1), 3.4),
-                             squeeze=False)
-    axes = list(axes[0])
-    n0, n1, e0, e1 = maps["extent"]
-    if "truth" in maps.files:
-        tn0, tn1, te0, te1 = maps["truth_extent"]
-        axes.pop(0).imshow(maps["truth"], origin="lower", extent=(te0, te1, tn0, tn1), cmap="hot_r", vmin=0, vmax=2)
-        fig.axes[0].set_title("truth (burning / burnt)")
-    for ax, (name, p) in zip(axes, panels, strict=True):
-        image = ax.imshow(p, origin="lower", extent=(e0, e1, n0, n1), cmap="inferno", vmin=0.0, vmax=1.0)
-        ax.set_title(name.removeprefix("agent_"))
-    for ax in fig.axes:
-        ax.set_xlabel("east [m]")
-    fig.axes[0].set_ylabel("north [m]")
-    fig.colorbar(image, ax=fig.axes, shrink=0.8, label="p(fire)")
-    folder.mkdir(exist_ok=True)
-    with atomic_file(folder / "fire_maps.png", "wb") as f:
-        fig.savefig(f, format="png", dpi=90)
-    plt.close(fig)
