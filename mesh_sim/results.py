@@ -1,5 +1,5 @@
 """Merge a run's per-process metrics into ``metrics.json``, print the summary table, draw the plots
-(:mod:`mesh_sim.plots`).
+(:mod:`mesh_sim.plots`) and finish the Rerun recording (:mod:`mesh_sim.observer_series`).
 
 Fleet figures pool every (agent, target) pair by samples: ``rmse = sqrt(sum n_i rmse_i^2 / sum n_i)``
 and ``anees = sum n_i anees_i / sum n_i``, likewise for the oracle, so ``rmse_ratio_to_oracle`` compares
@@ -121,7 +121,20 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
         draw_run_plots(metrics, run_dir)
     except (OSError, ValueError) as err:  # a plot is a convenience; the metrics are already written
         Console(stderr=True).print(f"[yellow]plots skipped: {err}")
+    if (run_dir / "recording.rrd").is_file():
+        finish(run_dir / "recording.rrd", metrics)
     return metrics
+
+
+def finish(recording: Path, metrics: dict) -> None:
+    """The run's series, compaction and final layout in its Rerun recording (:mod:`mesh_sim.observer_series`);
+    a recording that cannot be finished (e.g. cut short, without its footer) is left as it is, with a warning."""
+    from mesh_sim.observer_series import finish_recording  # Rerun only for a run that recorded
+
+    try:
+        finish_recording(recording, metrics)
+    except (OSError, ValueError, RuntimeError) as err:
+        Console(stderr=True).print(f"[yellow]recording left unfinished: {err}")
 
 
 def grid_fleet(agents: list[dict], grid: dict, sc) -> dict:

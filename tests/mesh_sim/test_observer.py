@@ -177,8 +177,8 @@ def test_observer_logs_expected_entities_and_survives_bad_input(tmp_path):
     recordings = [(r.application_id, r.recording_id) for r in RrdReader(str(path)).recordings()]
     assert recordings == [("skymesh", obs.rec.get_recording_id())]
     rows, last = _read_rrd(path)
-    for entity in ["/world", "/world/truth", "/world/links", "/metrics/uav0/tracks", "/metrics/uav0/bytes_rx",
-                   "/metrics/uav0/bytes_seen"] + [
+    for entity in ["/world", "/world/truth", "/world/links", "/metrics/tracks/uav0", "/metrics/bytes_rx/uav0",
+                   "/metrics/bytes_seen/uav0"] + [
         f"/world/{sub}" for a in ("uav0", "uav1", "uav2")
         for sub in (f"uav/{a}", f"uav/{a}/path", f"agents/{a}/tracks", f"agents/{a}/rays")
     ]:
@@ -255,7 +255,7 @@ def test_observer_process_over_zenoh_stops_on_sigterm(zenoh_router, tmp_path):
     assert "rejected a message from uav1 (bad_type)" in text, text  # b"garbage": an int, not an envelope
     rows, _ = _read_rrd(rrd)
     for entity in ("/world/truth", "/world/uav/uav0", "/world/uav/uav1/path", "/world/agents/uav0/tracks",
-                   "/world/agents/uav1/rays", "/world/links", "/metrics/uav1/tracks"):
+                   "/world/agents/uav1/rays", "/world/links", "/metrics/tracks/uav1"):
         assert rows.get(entity, 0) > 0, (entity, sorted(rows))
     assert rows["/world/uav/uav0"] >= 5
 

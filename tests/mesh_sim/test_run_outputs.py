@@ -1,6 +1,7 @@
-"""A tracking run's plots and the series behind them: every plot kind is a sane PNG after a short lockstep run, and
-the series say what they claim (the error series pools back to the reported RMSE, the NEES band is scipy's χ²
-interval, the traffic sums to ``bytes_tx``, the links follow the agents' neighbour reports)."""
+"""What a tracking run leaves for a reader: every plot kind is a sane PNG after a short lockstep run; the series
+say what they claim (the error series pools back to the reported RMSE, the NEES band is scipy's χ² interval, the
+traffic sums to ``bytes_tx``, the links follow the agents' neighbour reports); the Rerun recording is compacted
+and carries one blueprint made for the fleet and the same series as scalars."""
 
 from __future__ import annotations
 
@@ -9,11 +10,13 @@ import struct
 
 import numpy as np
 import pytest
+from rerun.chunk import RrdReader
 from scipy.stats import chi2
 
 from agent.evaluation import BIN_S, TrackEvaluator
 from fusion.gaussian import Gaussian
 from mesh_sim.lockstep import run_lockstep
+from mesh_sim.observer_geometry import nearest_truth
 from mesh_sim.phases import independent_samples
 from mesh_sim.plots import fire_maps
 from mesh_sim.run_series import error_series, link_intervals, nees_series, traffic_series
@@ -116,3 +119,61 @@ def test_fire_maps_are_a_grid_with_a_colour_bar(tmp_path):
     width, height = png_size(path)
     assert width / height < 2.5  # six panels in two rows, not one strip of 1728 x 306
     assert fire_maps.draw(tmp_path / "missing.npz", tmp_path) is None
+
+
+def blueprint_views(path) -> set[tuple[str, str, str]]:
+    """``(view class, name, origin)`` of every view in the recording's only blueprint."""
+    reader = RrdReader(path)
+    (store,) = reader.blueprints()
+    views = set()
+    for chunk in reader.stream(store=store):
+        batch = chunk.to_record_batch()
+        if "ViewBlueprint:class_identifier" in batch.schema.names:
+            cells = [batch.column(f"ViewBlueprint:{c}").to_pylist()[-1][0]
+                     for c in ("class_identifier", "display_name", "space_origin")]
+            views.add(tuple(cells))
+    return views
+
+
+def test_the_recording_carries_a_fleet_blueprint(run):
+    run_dir, metrics = run
+    views = blueprint_views(run_dir / "recording.rrd")
+    agents = [a["id"] for a in metrics["agents"]]
+    assert ("3D", "world", "/world") in views
+    assert {("3D", a, "/world") for a in agents} <= views  # one tab per agent
+    series = {origin for kind, _, origin in views if kind == "TimeSeries"}
+    assert {"/metrics/tracks", "/metrics/bytes_seen", "/series/anees", "/series/sent_bytes",
+            "/series/sent_messages"} <= series  # one panel per metric, not one per agent
+    assert {f"/series/error/{t['target']}" for t in metrics["oracle"]["targets"]} <= series
+    assert not any(origin.startswith("/maps") for _, _, origin in views)  # no fire in this scenario
+
+
+def test_the_recording_holds_the_series_and_is_compacted(run):
+    run_dir, metrics = run
+    reader = RrdReader(run_dir / "recording.rrd")
+    assert len(reader.recordings()) == 1
+    chunks = list(reader.stream())
+    rows: dict[str, int] = {}
+    for chunk in chunks:
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    for a in metrics["agents"]:
+        for target in a["targets"]:
+            entity = f"/series/error/{target['target']}/{a['id']}"
+            assert rows[entity] == rows[f"{entity}/two_sigma"] == len(error_series(target)) + 1  # + its static name
+        assert rows[f"/series/sent_bytes/{a['id']}"] == len(traffic_series(a)) + 1
+        assert rows[f"/metrics/tracks/{a['id']}"] > 10
+    assert rows["/series/anees/fleet"] == rows["/series/anees/band/low"] == len(nees_series(
+        [a["targets"] for a in metrics["agents"]])) + 1
+    assert len(chunks) < 3 * len(rows)  # the observer's ~2000 small chunks of a 20 s run merged
+    labels = {label for chunk in chunks if chunk.entity_path.startswith("/world/agents/")
+              and "Ellipsoids3D:labels" in chunk.to_record_batch().schema.names
+              for row in chunk.to_record_batch().column("Ellipsoids3D:labels").to_pylist() for label in row or []}
+    names = {t["target"] for t in metrics["oracle"]["targets"]}
+    assert {label.split("→")[-1] for label in labels if "→" in label} == names  # e.g. "uav1:T1→car"
+
+
+def test_a_track_is_named_after_the_true_target_within_the_gate():
+    ids, positions = ["car", "walker"], np.array([[0.0, 0, 0], [50.0, 0, 0]])
+    assert nearest_truth(ids, positions, np.array([48.0, 1, 0]), np.eye(3)) == "walker"
+    assert nearest_truth(ids, positions, np.array([25.0, 0, 0]), np.eye(3)) is None  # outside the gate
+    assert nearest_truth([], np.zeros((0, 3)), np.zeros(3), np.eye(3)) is None
