@@ -71,13 +71,13 @@ def test_the_fire_map_table_prints(lockstep_run):
     out = io.StringIO()
     Console(file=out, width=200).print(results.grid_table(metrics))
     text = out.getvalue()
-    assert "uav0" in text and "central" in text and "decoys rejected" in text
+    assert "uav0" in text and "central" in text and "decoys ignored" in text
 
 
 def test_rerun_recording_has_every_map_and_the_true_fire(lockstep_run):
     run_dir, _ = lockstep_run
     rows, _ = _read_rrd(run_dir / "recording.rrd")
-    for entity in ("/maps/uav0", "/maps/uav1", "/maps/truth"):
+    for entity in ("/maps/uav0", "/maps/uav1", "/maps/truth", "/maps/legend"):
         assert rows.get(entity, 0) > 0, (entity, sorted(rows))
 
 
