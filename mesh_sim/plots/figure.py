@@ -31,8 +31,9 @@ def figure(rows: int = 1, cols: int = 1, width: float = 8.0, height: float = 4.0
 def plain_log_scale(ax) -> None:
     """A logarithmic y axis labelled ``0.5, 1, 2`` rather than ``5 x 10^-1``."""
     ax.set_yscale("log")
+    ax.yaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
     ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
-    ax.yaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
 
 
 def save(fig, path: Path) -> Path:
