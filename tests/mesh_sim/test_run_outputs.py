@@ -19,6 +19,7 @@ from mesh_sim.lockstep import run_lockstep
 from mesh_sim.observer_geometry import nearest_truth
 from mesh_sim.phases import independent_samples
 from mesh_sim.plots import fire_maps
+from mesh_sim.results import finish
 from mesh_sim.run_series import error_series, link_intervals, nees_series, traffic_series
 from mesh_sim.scenario import load
 
@@ -177,3 +178,12 @@ def test_a_track_is_named_after_the_true_target_within_the_gate():
     assert nearest_truth(ids, positions, np.array([48.0, 1, 0]), np.eye(3)) == "walker"
     assert nearest_truth(ids, positions, np.array([25.0, 0, 0]), np.eye(3)) is None  # outside the gate
     assert nearest_truth([], np.zeros((0, 3)), np.zeros(3), np.eye(3)) is None
+
+
+def test_a_recording_that_cannot_be_read_is_left_as_it_is(run, tmp_path, capsys):
+    _, metrics = run
+    broken = tmp_path / "recording.rrd"
+    broken.write_bytes(b"not an rrd")
+    finish(broken, metrics)
+    assert broken.read_bytes() == b"not an rrd"
+    assert "recording left unfinished" in capsys.readouterr().err
