@@ -16,8 +16,9 @@ TRACKING_PLOTS = (rmse_bars, errors, nees, track_map, traffic, links)
 
 
 def draw_run_plots(metrics: dict, run_dir: Path) -> list[Path]:
-    """Every plot of a run into ``run_dir/plots``: the tracking plots when some target was scored (traffic and
-    links always), the fire maps when the run saved them. Returns the files written."""
+    """Every plot of a run into ``run_dir/plots``: RMSE, error and NEES when some target was scored, the map,
+    traffic and links whenever the run recorded them, the fire maps when the run saved them. Returns the files
+    written."""
     folder = run_dir / "plots"
     folder.mkdir(exist_ok=True)
     written = [m.draw(metrics, folder) for m in TRACKING_PLOTS]

@@ -14,18 +14,20 @@ from mesh_sim.plots.figure import agent_colour, figure, save
 
 
 def draw(metrics: dict, folder: Path) -> Path | None:
-    """One square panel (``None`` when the run recorded no traces or no target)."""
+    """One square panel (``None`` when the run recorded no UAV path; a run without targets, e.g. fire, draws the
+    UAV paths alone)."""
     traces = metrics["oracle"].get("traces") or {}
-    if not traces.get("truth"):
+    if not traces.get("uavs"):
         return None
     fig, axes = figure(width=8, height=7)
     ax = axes[0, 0]
-    for name, rows in sorted(traces["truth"].items()):
+    for name, rows in sorted(traces.get("truth", {}).items()):
         path = np.array(rows, float)
         ax.plot(path[:, 2], path[:, 1], color="black", lw=2.0)
         ax.annotate(name, (path[-1, 2], path[-1, 1]), fontsize="small", weight="bold",
                     xytext=(4, 4), textcoords="offset points")
-    ax.plot([], [], color="black", lw=2.0, label="true target paths")
+    if traces.get("truth"):
+        ax.plot([], [], color="black", lw=2.0, label="true target paths")
     for k, a in enumerate(metrics["agents"]):
         colour = agent_colour(k)
         uav = np.array(traces.get("uavs", {}).get(a["id"], []), float).reshape(-1, 4)

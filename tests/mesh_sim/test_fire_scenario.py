@@ -57,7 +57,9 @@ def test_maps_are_scored_against_the_truth_and_the_centralized_map(lockstep_run)
     assert maps["truth"].dtype == np.int8 and set(np.unique(maps["truth"])) <= {0, 1, 2}
     explored = np.abs(maps["central"] - 0.5) > 0.1
     assert explored.mean() > 0.2  # the entropy planner spread the cameras over a good part of the area
-    assert (run_dir / "plots" / "fire_maps.png").stat().st_size > 5000
+    for plot in ("fire_maps", "map", "traffic", "links"):  # no targets: no error, NEES or RMSE plot
+        assert (run_dir / "plots" / f"{plot}.png").stat().st_size > 5000
+    assert not (run_dir / "plots" / "errors.png").exists()
 
 
 def results_thresholds():
