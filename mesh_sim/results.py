@@ -206,8 +206,7 @@ def _fmt(value, spec: str) -> str:
 
 
 #: Under the tracking table: what a value outside its interval means.
-ANEES_LEGEND = ("ANEES \\[95 % χ² interval over independent samples]: ↓ below it = covariances too large "
-                "(under-confident), ↑ above it = too small (over-confident)")
+ANEES_LEGEND = "ANEES ↓ below its 95 % χ² interval: covariances too large; ↑ above: too small"
 
 
 def anees_cell(anees: float | None, samples: int) -> str:
