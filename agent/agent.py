@@ -34,6 +34,7 @@ from agent.net.topology import Topology
 from agent.plugins import Views
 from agent.sensors.registry import sensor_from_config
 from agent.sensors.truth import WorldTruth
+from agent.traffic import TrafficLog
 from agent.vehicles import vehicle_from_config
 from agent.vehicles.base import goal_to_setpoint
 from perception.terrain import terrain_from_config
@@ -76,7 +77,7 @@ class Agent:
             transport, LinkEmulator(agent_id, plan), lambda: self._now,
             lambda: {**self.world.uav_positions, self.id: self.vehicle.state().position})
         self.transport = transport if self.radio is None else self.radio
-        self.bytes_tx: Counter = Counter()  # kind -> bytes
+        self.traffic = TrafficLog()  # bytes sent by kind and over time
         self.sim_bytes_tx: Counter = Counter()  # kind -> bytes of simulation-only data (for the oracles)
         self.bytes_rx: Counter = Counter()  # (peer, kind) -> bytes
         self.rejected: Counter = Counter()  # reason -> messages
@@ -181,7 +182,7 @@ class Agent:
 
     def _send(self, key: str, kind: str, data: bytes) -> None:
         self.transport.publish(key, data)
-        self.bytes_tx[kind] += len(data)
+        self.traffic.sent(self._now, kind, len(data))
 
     def to_simulator(self, kind: str, t: float, payload: dict) -> None:
         """Simulation-only data for the centralized references (:class:`agent.plugins.Outbox`): not radio traffic."""
@@ -224,12 +225,10 @@ class Agent:
 
     # -- results --------------------------------------------------------------------------------
     def metrics(self) -> dict:
-        sensor = self.sensor.metrics()
-        drops = Counter() if self.radio is None else self.radio.drops
+        sensor, drops = self.sensor.metrics(), Counter() if self.radio is None else self.radio.drops
         out = {
             "id": self.id, "steps": self.steps,
-            "bytes_tx": int(sum(self.bytes_tx.values())), "bytes_rx": int(sum(self.bytes_rx.values())),
-            "bytes_tx_by_kind": dict(self.bytes_tx), "sim_bytes_tx_by_kind": dict(self.sim_bytes_tx),
+            "bytes_rx": int(sum(self.bytes_rx.values())), "sim_bytes_tx_by_kind": dict(self.sim_bytes_tx),
             "bytes_rx_by_peer": _by_peer(self.bytes_rx),
             "msgs_rejected": int(sum(v for k, v in self.rejected.items() if k != "duplicate")),
             "rejected_by_reason": dict(self.rejected), **self.fusions.metrics(),
@@ -238,8 +237,8 @@ class Agent:
             "telemetry_thinned": self.telemetry_thinned,
             "sensor": sensor, "sensor_outcomes": dict(Counter(sensor["outcomes"]) + self.unused),
         }
-        for part in (*self.exchanges.values(), self.planner, self.vehicle, self.topology, self.window):  # optional
-            out.update(getattr(part, "metrics", dict)())
+        for part in (*self.exchanges.values(), self.planner, self.vehicle, self.topology, self.window, self.traffic):
+            out.update(getattr(part, "metrics", dict)())  # metrics() is optional for a plug-in
         return out
 
 

@@ -7,9 +7,12 @@ perfectly consistent (Bar-Shalom et al., *Estimation with Applications to Tracki
 
 Each target's summary also has a ``tail``: the same figures over the last ``tail_s`` seconds before the
 newest evaluation only, e.g. to see estimates re-converge after a partition heals, which the whole-run
-figures dilute. And a ``bins`` list, ``[start_s, squared_errors, nees, samples]`` per :data:`BIN_S` time bin
-(simulation time; a bin starts at ``k BIN_S``) that has samples: the sums behind the figures, so that any
-interval of whole bins can be pooled afterwards (:mod:`mesh_sim.phases`) without keeping every sample.
+figures dilute. And a ``bins`` list, ``[start_s, squared_errors, nees, samples, position_variance]`` per
+:data:`BIN_S` time bin (simulation time; a bin starts at ``k BIN_S``) that has samples: the sums behind the
+figures, so that any interval of whole bins can be pooled afterwards (:mod:`mesh_sim.phases`) without keeping
+every sample, and the sum of ``trace(P_pos)`` — the squared error the estimator expects, ``E|e|^2 = trace(P_pos)``
+for a consistent one — so that the error over time can be drawn against the estimator's own ``sigma``
+(:mod:`mesh_sim.plots.errors`).
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ class _TargetScore:
     nees: float = 0.0
     count: int = 0
     first_track_t: float | None = None
-    bins: dict[int, list] = field(default_factory=dict)  # bin index -> [squared errors, nees, count]
+    bins: dict[int, list] = field(default_factory=dict)  # bin index -> [squared errors, nees, count, trace(P_pos)]
 
 
 class TrackEvaluator:
@@ -61,10 +64,11 @@ class TrackEvaluator:
             score.squared_errors += squared_error
             score.nees += nees
             score.count += 1
-            sums = score.bins.setdefault(int(np.floor(t / BIN_S + 1e-9)), [0.0, 0.0, 0])
+            sums = score.bins.setdefault(int(np.floor(t / BIN_S + 1e-9)), [0.0, 0.0, 0, 0.0])
             sums[0] += squared_error
             sums[1] += nees
             sums[2] += 1
+            sums[3] += float(np.trace(best.cov[:3, :3]))
             self._recent.append((t, target["id"], squared_error, nees))
             if score.first_track_t is None:
                 score.first_track_t = t - self.t0
@@ -72,7 +76,8 @@ class TrackEvaluator:
     def summary(self) -> list[dict]:
         """``[{"target", "rmse", "anees", "time_to_first_track", "samples", "tail", "bins"}]`` (None where
         never tracked); ``tail`` is ``{"window_s", "rmse", "anees", "samples"}`` over the last ``tail_s`` seconds,
-        ``bins`` the ``[start_s, squared_errors, nees, samples]`` of each :data:`BIN_S` bin with samples."""
+        ``bins`` the ``[start_s, squared_errors, nees, samples, position_variance]`` of each :data:`BIN_S` bin
+        with samples (``position_variance``: the sum of ``trace(P_pos)``)."""
         tails: dict[str, _TargetScore] = {}
         for _, target, squared_error, nees in self._recent:  # record() keeps only the last tail_s seconds
             tail = tails.setdefault(target, _TargetScore())

@@ -8,20 +8,29 @@ logs one recording. The same observer works against a real fleet: it only needs 
 What is logged, on the ``sim_time`` timeline (a duration, from each envelope's stamp), in NED
 (``world`` carries a static ``RIGHT_HAND_Z_DOWN`` view coordinate: x north, y east, z down)::
 
-    world/truth                    Points3D      truth targets, labelled by id
+    world/truth                    Points3D      truth targets, labelled by id ("car")
     world/uav/<id>                 Points3D      each UAV's position
     world/uav/<id>/path            LineStrips3D  its last PATH_POINTS positions
-    world/agents/<id>/tracks       Ellipsoids3D  2-sigma position ellipsoids of the agent's tracks
+    world/agents/<id>/tracks       Ellipsoids3D  2-sigma position ellipsoids of the agent's tracks, labelled with the
+                                                 true target nearest in Mahalanobis distance within the evaluator's
+                                                 gate ("uav1:T1→car"; labels shown on hover, so that they never
+                                                 pile up over a target every agent tracks)
     world/agents/<id>/rays         LineStrips3D  bearing rays from the UAV (RAY_LENGTH m or to z=0 ground)
     world/agents/<id>/particles    Points3D      particles of the agent's track candidates (initiation = particles)
     world/links                    LineStrips3D  agent-neighbour links: green if both ends report the link,
                                                  orange if only one does
     maps/<id>                      Image         the agent's fire map (cell probability), north up
     maps/truth                     Image         the true fire: unburnt / burning / burnt cells
-    metrics/<id>/tracks            Scalars       number of tracks the agent reports
-    metrics/<id>/bytes_rx          Scalars       the agent's own received-bytes count, if its telemetry has one
-    metrics/<id>/video_quality     Scalars       the camera's video-quality measure D(t), if its telemetry has one
-    metrics/<id>/bytes_seen        Scalars       bytes the observer has received from the agent (all kinds)
+    maps/legend                    TextDocument  what the maps' colours mean
+    metrics/tracks/<id>            Scalars       number of tracks the agent reports
+    metrics/bytes_rx/<id>          Scalars       the agent's own received-bytes count, if its telemetry has one
+    metrics/video_quality/<id>     Scalars       the camera's video-quality measure D(t), if its telemetry has one
+    metrics/bytes_seen/<id>        Scalars       bytes the observer has received from the agent (all kinds)
+
+One line per agent in one panel per metric: each ``metrics/<metric>/<id>`` is named after its agent in its colour
+(``SeriesLines``). The layout (:func:`mesh_sim.observer_blueprint.fleet_blueprint`) is sent again whenever it
+grows: a new agent, a first fire map, a metric first seen. After a run, :mod:`mesh_sim.observer_series` adds the
+run's error, NEES and traffic series, compacts the recording and sends the final layout.
 
 Run as a process (the launcher stops it with SIGTERM; it also exits when its parent dies)::
 
@@ -33,7 +42,7 @@ Run as a process (the launcher stops it with SIGTERM; it also exits when its par
 ``--spawn`` starts a live Rerun viewer; it needs the ``rerun`` viewer binary and a display (on a
 headless machine the viewer dies and shutdown waits several seconds — never use it in tests).
 
-Rerun is imported here and nowhere else in the project.
+Rerun is imported in the ``observer*`` modules and nowhere else in the project.
 """
 
 from __future__ import annotations
@@ -56,8 +65,9 @@ from agent.net.fleet_key import read_key_file
 from agent.net.keys import Incoming, Keys
 from agent.net.zenoh_transport import ZenohTransport, load_config
 from agent.runtime import usage_error
-from mesh_sim.observer_geometry import RAY_LENGTH, cov_to_ellipsoid, ray_end
-from mesh_sim.observer_grids import GridImages
+from mesh_sim.observer_blueprint import LIVE_METRICS, MAPS_LEGEND, fleet_blueprint
+from mesh_sim.observer_geometry import RAY_LENGTH, cov_to_ellipsoid, nearest_truth, ray_end
+from mesh_sim.observer_grids import LEGEND, GridImages
 from mesh_sim.observer_messages import parse_telemetry, parse_truth
 
 log = logging.getLogger("skymesh.observer")
@@ -97,6 +107,10 @@ class Observer:
         self._paths: dict[str, deque] = {}
         self._positions: dict[str, np.ndarray] = {}
         self._reports: dict[str, tuple[float, set[str]]] = {}  # agent -> (stamp, neighbours it reports)
+        self._truth: tuple[list[str], np.ndarray] = ([], np.zeros((0, 3)))  # the latest true targets
+        self._series: set[str] = set()  # metric entities whose line is named and coloured
+        self._layout: tuple = ()  # what the last blueprint was made for: (agents, metrics, maps)
+        self._maps = False  # whether a fire map was logged
         self.grids = GridImages()
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
 
@@ -170,13 +184,16 @@ class Observer:
                 self._log_truth(*parsed)
                 if "fire" in env.payload:
                     self.rec.log("maps/truth", rr.Image(self.grids.truth_image(env.payload["fire"])))
+                    self._maps = True
             else:
                 self.bytes_seen[env.origin] += len(incoming.data)
-                self.rec.log(f"metrics/{env.origin}/bytes_seen", rr.Scalars(float(self.bytes_seen[env.origin])))
+                self._scalar("bytes_seen", env.origin, float(self.bytes_seen[env.origin]))
                 if kind == "telemetry":
                     self._log_telemetry(env.origin, env.stamp, parsed)
                 elif kind == "grid":
                     self.rec.log(f"maps/{env.origin}", rr.Image(parsed))
+                    self._maps = True
+            self._update_layout()
         except Exception as err:  # a safety net: the observer never dies on input
             log.warning("observer: could not log a %s from %s: %s", kind, peer, err)
             self.rejected["log_error"] += 1
@@ -196,9 +213,27 @@ class Observer:
             self._colours[agent] = PALETTE[len(self._colours) % len(PALETTE)]
         return self._colours[agent]
 
+    def _scalar(self, metric: str, agent: str, value: float) -> None:
+        """One point of ``metrics/<metric>/<agent>``; the first names the line after the agent, in its colour."""
+        path = f"metrics/{metric}/{agent}"
+        if path not in self._series:
+            self._series.add(path)
+            self.rec.log(path, rr.SeriesLines(colors=[self._colour(agent)], names=[agent]), static=True)
+        self.rec.log(path, rr.Scalars(value))
+
+    def _update_layout(self) -> None:
+        """Send the blueprint again if the fleet, its metrics or its maps grew since the last one."""
+        metrics = [m for m in LIVE_METRICS if any(p.startswith(f"metrics/{m}/") for p in self._series)]
+        layout = (tuple(self._colours), tuple(metrics), self._maps)
+        if layout != self._layout:
+            if self._maps and not (self._layout and self._layout[2]):
+                self.rec.log(MAPS_LEGEND, rr.TextDocument(LEGEND, media_type=rr.MediaType.MARKDOWN), static=True)
+            self._layout = layout
+            self.rec.send_blueprint(fleet_blueprint(list(self._colours), metrics, self._maps))
+
     def _log_truth(self, ids: list[str], positions: np.ndarray) -> None:
-        self.rec.log("world/truth", rr.Points3D(positions, radii=1.5, colors=[TRUTH_COLOUR] * len(ids),
-                                                labels=[f"T{i}" for i in ids]))
+        self._truth = (ids, positions)
+        self.rec.log("world/truth", rr.Points3D(positions, radii=1.5, colors=[TRUTH_COLOUR] * len(ids), labels=ids))
 
     def _log_telemetry(self, agent: str, stamp: float, t: dict) -> None:
         rec, colour, pos = self.rec, self._colour(agent), t["position"]
@@ -214,22 +249,24 @@ class Observer:
             centres.append(centre)
             halves.append(half)
             quats.append(q)
-            labels.append(f"{agent}:T{tid}")
+            name = nearest_truth(*self._truth, centre, cov)
+            labels.append(f"{agent}:T{tid}" + ("" if name is None else f"→{name}"))
         rec.log(f"world/agents/{agent}/tracks", rr.Ellipsoids3D(
             centers=np.asarray(centres).reshape(-1, 3), half_sizes=np.asarray(halves).reshape(-1, 3),
             quaternions=np.asarray(quats).reshape(-1, 4), colors=[colour] * len(labels), labels=labels,
-            fill_mode=rr.components.FillMode.MajorWireframe))
+            show_labels=False, fill_mode=rr.components.FillMode.MajorWireframe))
 
         if len(t["particles"]):
             rec.log(f"world/agents/{agent}/particles", rr.Points3D(t["particles"], radii=0.4, colors=[colour]))
         rays = [np.array([pos, ray_end(pos, azel, self.ray_length)]) for azel in t["bearings"]]
         rec.log(f"world/agents/{agent}/rays", rr.LineStrips3D(rays, radii=0.15, colors=[colour] * len(rays)))
 
-        rec.log(f"metrics/{agent}/tracks", rr.Scalars(float(len(t["tracks"]))))
+        if t["tracks"] or f"metrics/tracks/{agent}" in self._series:  # no panel stuck at 0 in a fire run
+            self._scalar("tracks", agent, float(len(t["tracks"])))
         if t["bytes_rx"] is not None:
-            rec.log(f"metrics/{agent}/bytes_rx", rr.Scalars(t["bytes_rx"]))
+            self._scalar("bytes_rx", agent, t["bytes_rx"])
         if t.get("video_quality") is not None:
-            rec.log(f"metrics/{agent}/video_quality", rr.Scalars(t["video_quality"]))
+            self._scalar("video_quality", agent, t["video_quality"])
 
         self._positions[agent] = pos
         self._reports[agent] = (stamp, t["neighbours"] - {agent})

@@ -2,13 +2,14 @@
 
 :func:`cov_to_ellipsoid` gives the half-sizes and rotation (a scalar-last quaternion, as Rerun's
 ``Ellipsoids3D`` takes it) of the ``n_sigma`` ellipsoid of a position covariance; :func:`ray_end` where a
-drawn bearing ray from a UAV ends.
+drawn bearing ray from a UAV ends; :func:`nearest_truth` which true target a track's label names.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from agent.evaluation import MATCH_GATE
 from fusion.measurement import azel_to_los
 
 RAY_LENGTH = 150.0  # m; a ray stops earlier where it meets flat ground z = 0 (chosen here)
@@ -65,3 +66,16 @@ def ray_end(origin: np.ndarray, azel, length: float = RAY_LENGTH) -> np.ndarray:
     if los[2] > 1e-9 and origin[2] < 0.0:
         length = min(length, -origin[2] / los[2])
     return origin + length * los
+
+
+def nearest_truth(ids: list[str], positions: np.ndarray, centre: np.ndarray, cov: np.ndarray,
+                  gate: float = MATCH_GATE) -> str | None:
+    """The id of the true target nearest to a track of position ``centre`` and covariance ``cov`` in Mahalanobis
+    distance ``d^2 = (x - c)^T P^-1 (x - c)``, if within ``gate`` (the evaluator's match,
+    :data:`agent.evaluation.MATCH_GATE`); ``None`` otherwise or without targets."""
+    if not ids:
+        return None
+    d = np.asarray(positions, float) - centre
+    d2 = np.einsum("ij,ij->i", d, np.linalg.solve(cov, d.T).T)
+    best = int(np.argmin(d2))
+    return ids[best] if d2[best] <= gate else None

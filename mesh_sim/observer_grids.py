@@ -19,6 +19,11 @@ from fusion.grid_layers import GridLayers
 
 COLOURMAP = "inferno"  # chosen here
 TRUTH_COLOURS = np.array([[40, 40, 40], [255, 90, 0], [110, 70, 60]], np.uint8)  # unburnt, burning, burnt
+#: The maps' legend (``maps/legend`` in the recording).
+LEGEND = ("**Fire maps** — north up, east to the right.\n\n"
+          "* `truth`: unburnt (dark grey), burning (orange), burnt (brown) cells.\n"
+          f"* each agent's map: the cell's probability of fire, from 0 (black) to 1 (pale yellow), "
+          f"matplotlib's `{COLOURMAP}` colour map.\n")
 
 
 def _lut(name: str = COLOURMAP) -> np.ndarray:

@@ -93,9 +93,9 @@ def _sums(target_lists: list[list[dict]], t0: float, t1: float) -> dict[str, np.
     out: dict[str, np.ndarray] = {}
     for targets in target_lists:
         for t in targets:
-            for start, *sums in t.get("bins", []):
+            for start, *sums in t.get("bins", []):  # sums[3:]: the position variance, not pooled here
                 if t0 - 1e-9 <= start < t1 - 1e-9:
-                    out[t["target"]] = out.get(t["target"], np.zeros(3)) + sums
+                    out[t["target"]] = out.get(t["target"], np.zeros(3)) + sums[:3]
     return out
 
 
@@ -124,7 +124,8 @@ def _anees(sums: np.ndarray) -> float | None:
     return float(sums[1] / (DIM * sums[2])) if sums[2] else None
 
 
-def _ratio(a: float | None, b: float | None) -> float | None:
+def ratio_of(a: float | None, b: float | None) -> float | None:
+    """``a / b``, or ``None`` without both (or with ``b`` zero)."""
     return a / b if a is not None and b else None
 
 
@@ -142,8 +143,8 @@ def phase_figures(agents: list[list[dict]], oracle: list[dict], t0: float, t1: f
     rmse, oracle_rmse, n = _rmse(fleet), _rmse(central), int(fleet[2])
     anees, k = _anees(fleet), independent_samples(agents, t0, t1)
     lo, hi = anees_interval(k)
-    return {"fleet_rmse": rmse, "oracle_rmse": oracle_rmse, "rmse_ratio_to_oracle": _ratio(rmse, oracle_rmse),
-            "rmse_ratio_to_in_flight": _ratio(rmse, _rmse(reachable)),
+    return {"fleet_rmse": rmse, "oracle_rmse": oracle_rmse, "rmse_ratio_to_oracle": ratio_of(rmse, oracle_rmse),
+            "rmse_ratio_to_in_flight": ratio_of(rmse, _rmse(reachable)),
             "anees": anees, "oracle_anees": _anees(central), "samples": n, "independent_samples": k,
             "anees_interval": [lo, hi],
             "anees_inside": anees is not None and lo <= anees <= hi}

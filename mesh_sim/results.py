@@ -1,4 +1,5 @@
-"""Merge a run's per-process metrics into ``metrics.json``, print the summary table, draw the plots.
+"""Merge a run's per-process metrics into ``metrics.json``, print the summary table, draw the plots
+(:mod:`mesh_sim.plots`) and finish the Rerun recording (:mod:`mesh_sim.observer_series`).
 
 Fleet figures pool every (agent, target) pair by samples: ``rmse = sqrt(sum n_i rmse_i^2 / sum n_i)``
 and ``anees = sum n_i anees_i / sum n_i``, likewise for the oracle, so ``rmse_ratio_to_oracle`` compares
@@ -12,14 +13,18 @@ the run (partition, merge, a lost agent...: :mod:`mesh_sim.phases`).
 from __future__ import annotations
 
 import json
+import math
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
-from rich.console import Console
+from rich.console import Console, Group
+from rich.markup import escape
 from rich.table import Table
 
-from agent.runtime import atomic_file, write_json
-from mesh_sim.phases import caption, run_phases
+from agent.runtime import write_json
+from mesh_sim.phases import anees_interval, caption, independent_samples, ratio_of, run_phases
+from mesh_sim.plots import draw_run_plots
 
 
 def pooled(targets: list[dict]) -> tuple[float | None, float | None]:
@@ -113,11 +118,23 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
         metrics["fleet"]["grid"] = grid_fleet(agents, oracle["grid"], sc)
     write_json(run_dir / "metrics.json", metrics)
     try:
-        plot(metrics, run_dir / "plots")
-        plot_fire_maps(run_dir / "fire_maps.npz", run_dir / "plots")
+        draw_run_plots(metrics, run_dir)
     except (OSError, ValueError) as err:  # a plot is a convenience; the metrics are already written
         Console(stderr=True).print(f"[yellow]plots skipped: {err}")
+    if (run_dir / "recording.rrd").is_file():
+        finish(run_dir / "recording.rrd", metrics)
     return metrics
+
+
+def finish(recording: Path, metrics: dict) -> None:
+    """The run's series, compaction and final layout in its Rerun recording (:mod:`mesh_sim.observer_series`);
+    a recording that cannot be finished (e.g. cut short, without its footer) is left as it is, with a warning."""
+    from mesh_sim.observer_series import finish_recording  # Rerun only for a run that recorded
+
+    try:
+        finish_recording(recording, metrics)
+    except (OSError, ValueError, RuntimeError) as err:
+        Console(stderr=True).print(f"[yellow]recording left unfinished: {err}")
 
 
 def grid_fleet(agents: list[dict], grid: dict, sc) -> dict:
@@ -150,9 +167,9 @@ def grid_table(metrics: dict) -> Table | None:
         return None
     threshold = metrics["fleet"]["grid"]["threshold"]
     table = Table(title=f"fire map — alarms at p > {threshold:g}")
-    for col in ("agent", "fires found", "decoys rejected", "other false", "loc. error [m]", "KL to central",
-                "grid bytes/s", "grid msgs (key)"):
-        table.add_column(col, justify="right")
+    for col in ("agent", "fires found", "decoys ignored", "other alarms", "loc. error [m]", "KL to central",
+                "grid [B/s]", "grid msgs (key)"):
+        table.add_column(escape(col), justify="right", overflow="fold")
     duration = metrics["config"]["duration"]
     by_id = {a["id"]: a for a in metrics["agents"]}
     for agent, g in grid["agents"].items():
@@ -188,36 +205,89 @@ def _fmt(value, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
-def summary_table(metrics: dict) -> Table:
-    table = Table(title=f"skymesh run — {metrics['status']}")
-    for col in ("agent", "RMSE [m]", "ANEES", "targets", "first track [s]", "exact", "bytes/s", "radio drops",
-                "rejected", "deadline misses"):
-        table.add_column(col, justify="right")
-    duration = metrics["config"]["duration"]
+#: Under the tracking table: what a value outside its interval means.
+ANEES_LEGEND = "ANEES ↓ below its 95 % χ² interval: covariances too large; ↑ above: too small"
+
+
+def anees_cell(anees: float | None, samples: int) -> str:
+    """``0.31 ↓ [0.62, 1.45]``: an ANEES, its two-sided 95 % χ² interval for ``samples`` independent samples
+    (:func:`mesh_sim.phases.anees_interval`) and an arrow when it lies below (↓) or above (↑) it."""
+    if anees is None:
+        return "-"
+    lo, hi = anees_interval(samples)
+    mark = " ↓" if anees < lo else " ↑" if anees > hi else ""
+    return escape(f"{anees:.2f}{mark} [{lo:.2f}, {hi:.2f}]")
+
+
+def summary_table(metrics: dict) -> Group:
+    """The run's terminal summary, at most 80 columns wide: a tracking table (omitted when no agent tracks
+    targets, e.g. the fire scenario) and a network table, each with a labelled fleet row."""
+    tracking = tracking_table(metrics)
+    network = network_table(metrics)
+    if tracking is None:
+        network.title = f"skymesh run — {metrics['status']} — network"
+        return Group(network)
+    return Group(tracking, network)
+
+
+def tracking_table(metrics: dict) -> Table | None:
+    """Per agent, the oracles and the fleet: RMSE, RMSE ÷ the oracle's, ANEES with its interval, targets
+    tracked and the last first track (``None`` when no agent scored a target)."""
+    agents = [a for a in metrics["agents"] if a.get("targets")]
+    if not agents:
+        return None
+    o, f = metrics["oracle"], metrics["fleet"]
+    table = Table(title=f"skymesh run — {metrics['status']} — tracking", caption_justify="left")
+    for col in ("agent", "RMSE [m]", "÷ oracle", "ANEES [95 % χ²]", "targets", "first track [s]"):
+        table.add_column(escape(col), justify="right", no_wrap=col.startswith("ANEES"), overflow="fold")
     for a in metrics["agents"]:
         if "targets" not in a:
-            table.add_row(a["id"], a.get("status", "?"), *["-"] * 8)
+            table.add_row(a["id"], a.get("status", "?"), *["-"] * 4)
             continue
         rmse, anees = pooled(a["targets"])
         firsts = [t["time_to_first_track"] for t in a["targets"] if t["time_to_first_track"] is not None]
         tracked = sum(t["rmse"] is not None for t in a["targets"])
-        table.add_row(
-            a["id"], _fmt(rmse, ".2f"), _fmt(anees, ".2f"), f"{tracked}/{len(a['targets'])}",
-            _fmt(max(firsts) if firsts else None, ".1f"), _fmt(a.get("exact_share"), ".0%"),
-            f"{a['bytes_tx'] / duration:,.0f}",
-            _drops(a.get("radio_drops_by_cause", {})), str(a["msgs_rejected"]), str(a.get("deadline_misses", "-")),
-        )
-    o, f = metrics["oracle"], metrics["fleet"]
-    table.add_row("oracle", _fmt(o["rmse"], ".2f"), _fmt(o["anees"], ".2f"), *[""] * 7, style="dim")
-    if o.get("imm_rmse") is not None:
-        table.add_row("oracle IMM", _fmt(o["imm_rmse"], ".2f"), _fmt(o["imm_anees"], ".2f"), *[""] * 7, style="dim")
-    table.add_row("fleet", _fmt(f["rmse"], ".2f"), _fmt(f["anees"], ".2f"),
-                  f"ratio {_fmt(f['rmse_ratio_to_oracle'], '.2f')}", _in_flight(f), _fmt(f.get("exact_share"), ".0%"),
-                  _fmt(f["bytes_per_agent_per_s"], ",.0f"), "", "", "", style="bold")
+        table.add_row(a["id"], _fmt(rmse, ".2f"), _fmt(ratio_of(rmse, o["rmse"]), ".2f"),
+                      anees_cell(anees, independent_samples([a["targets"]], 0.0, math.inf)),
+                      f"{tracked}/{len(a['targets'])}", _fmt(max(firsts) if firsts else None, ".1f"))
+    for name, rmse_key, anees_key, targets_key in (("oracle", "rmse", "anees", "targets"),
+                                                    ("oracle IMM", "imm_rmse", "imm_anees", "imm_targets")):
+        if o.get(rmse_key) is not None:
+            k = independent_samples([o.get(targets_key, [])], 0.0, math.inf)
+            table.add_row(name, _fmt(o[rmse_key], ".2f"), _fmt(ratio_of(o[rmse_key], o["rmse"]), ".2f"),
+                          anees_cell(o[anees_key], k), "", "", style="dim")
+    k = independent_samples([a["targets"] for a in agents], 0.0, math.inf)
+    table.add_row("fleet", _fmt(f["rmse"], ".2f"), _fmt(f["rmse_ratio_to_oracle"], ".2f"), anees_cell(f["anees"], k),
+                  "all" if f["targets_tracked_by_every_agent"] else "not all", "", style="bold")
     phases = metrics.get("phases", [])
-    captions = [c for c in (_orbit_caption(o.get("orbits")), *map(_loss_caption, metrics.get("losses", [])),
+    captions = [c for c in (_in_flight(f), _orbit_caption(o.get("orbits")),
+                            *map(_loss_caption, metrics.get("losses", [])),
                             *(map(caption, phases) if len(phases) > 1 else ())) if c]
-    table.caption = "\n".join(captions) or None
+    table.caption = "\n".join([ANEES_LEGEND, *captions])
+    return table
+
+
+def network_table(metrics: dict) -> Table:
+    """Per agent and for the fleet: bytes sent per second, the share of beliefs fused exactly, radio drops,
+    rejected messages and deadline misses (the fleet row: the mean rate per agent, the other counts summed)."""
+    table = Table(title="network", caption_justify="left")
+    for col in ("agent", "sent [B/s]", "exact", "radio drops", "rejected", "deadline misses"):
+        table.add_column(escape(col), justify="right", no_wrap=col == "radio drops", overflow="fold")
+    duration = metrics["config"]["duration"]
+    drops: Counter = Counter()
+    for a in metrics["agents"]:
+        if "bytes_tx" not in a:
+            table.add_row(a["id"], a.get("status", "?"), *["-"] * 4)
+            continue
+        drops.update(a.get("radio_drops_by_cause", {}))
+        table.add_row(a["id"], f"{a['bytes_tx'] / duration:,.0f}", _fmt(a.get("exact_share"), ".0%"),
+                      _drops(a.get("radio_drops_by_cause", {})), str(a["msgs_rejected"]),
+                      str(a.get("deadline_misses", "-")))
+    f, alive = metrics["fleet"], [a for a in metrics["agents"] if "bytes_tx" in a]
+    table.add_row("fleet", _fmt(f["bytes_per_agent_per_s"], ",.0f"), _fmt(f.get("exact_share"), ".0%"), _drops(drops),
+                  str(sum(a["msgs_rejected"] for a in alive)),
+                  str(sum(a.get("deadline_misses", 0) for a in alive)), style="bold")
+    table.caption = "fleet row: sent is the mean per agent; drops, rejections and misses are summed"
     return table
 
 
@@ -247,72 +317,13 @@ def _orbit_caption(orbits: dict | None) -> str | None:
             f"{orbits['on_circle_share']:.0%} of the time after{spacing}")
 
 
-def _in_flight(fleet: dict) -> str:
-    """The fleet's RMSE over its in-flight oracles', in the table's fifth column."""
+def _in_flight(fleet: dict) -> str | None:
+    """The fleet's RMSE over its in-flight oracles', under the tracking table."""
     ratio = fleet.get("rmse_ratio_to_in_flight")
-    return "" if ratio is None else f"in flight {ratio:.2f}"
+    return None if ratio is None else f"fleet RMSE ÷ in-flight oracles' (what could reach each agent): {ratio:.2f}"
 
 
 def _drops(by_cause: dict) -> str:
     """``12 (loss 9, rate 3)``: radio drops and their causes."""
     total = sum(by_cause.values())
     return f"{total} ({', '.join(f'{k} {v}' for k, v in sorted(by_cause.items()))})" if total else "0"
-
-
-def plot(metrics: dict, folder: Path) -> None:
-    """Per-target RMSE of every agent beside the oracle's (``plots/rmse.png``)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    folder.mkdir(exist_ok=True)
-    targets = sorted({t["target"] for a in metrics["agents"] for t in a.get("targets", [])})
-    if not targets:
-        return
-    series = {a["id"]: {t["target"]: t["rmse"] for t in a.get("targets", [])} for a in metrics["agents"]}
-    series["oracle"] = {t["target"]: t["rmse"] for t in metrics["oracle"].get("targets", [])}
-    fig, ax = plt.subplots(figsize=(7, 4))
-    width = 0.8 / len(series)
-    for k, (name, values) in enumerate(series.items()):
-        xs = np.arange(len(targets)) + k * width
-        ax.bar(xs, [values.get(t) or 0.0 for t in targets], width, label=name)
-    ax.set_xticks(np.arange(len(targets)) + 0.4 - width / 2, targets)
-    ax.set_ylabel("position RMSE [m]")
-    ax.legend(fontsize="small", ncols=2)
-    fig.tight_layout()
-    with atomic_file(folder / "rmse.png", "wb") as f:
-        fig.savefig(f, format="png", dpi=100)
-    plt.close(fig)
-
-
-def plot_fire_maps(maps_file: Path, folder: Path) -> None:
-    """The true fire beside the centralized map and every agent's (``plots/fire_maps.png``)."""
-    if not maps_file.is_file():
-        return
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    maps = np.load(maps_file)
-    panels = [(k, maps[k]) for k in ("central", *sorted(k for k in maps.files if k.startswith("agent_")))]
-    fig, axes = plt.subplots(1, len(panels) + ("truth" in maps.files), figsize=(3.2 * (len(panels) + 1), 3.4),
-                             squeeze=False)
-    axes = list(axes[0])
-    n0, n1, e0, e1 = maps["extent"]
-    if "truth" in maps.files:
-        tn0, tn1, te0, te1 = maps["truth_extent"]
-        axes.pop(0).imshow(maps["truth"], origin="lower", extent=(te0, te1, tn0, tn1), cmap="hot_r", vmin=0, vmax=2)
-        fig.axes[0].set_title("truth (burning / burnt)")
-    for ax, (name, p) in zip(axes, panels, strict=True):
-        image = ax.imshow(p, origin="lower", extent=(e0, e1, n0, n1), cmap="inferno", vmin=0.0, vmax=1.0)
-        ax.set_title(name.removeprefix("agent_"))
-    for ax in fig.axes:
-        ax.set_xlabel("east [m]")
-    fig.axes[0].set_ylabel("north [m]")
-    fig.colorbar(image, ax=fig.axes, shrink=0.8, label="p(fire)")
-    folder.mkdir(exist_ok=True)
-    with atomic_file(folder / "fire_maps.png", "wb") as f:
-        fig.savefig(f, format="png", dpi=90)
-    plt.close(fig)

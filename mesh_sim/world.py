@@ -37,6 +37,7 @@ from mesh_sim.grid_oracle import GridOracle, grid_extent
 from mesh_sim.oracle import InFlightOracle, Oracle
 from mesh_sim.orbit_watch import OrbitWatch
 from mesh_sim.particle_oracle import ParticleOracle
+from mesh_sim.run_traces import RunTraces
 from mesh_sim.scenario import load
 from mesh_sim.target_set import truth_snapshot
 from perception.terrain import terrain_from_config
@@ -67,6 +68,7 @@ class World:
         radius = float(tasking.get("orbit_radius", AssignmentConfig.orbit_radius))
         self.orbits = OrbitWatch(radius, scenario.agent.agents) if tasking.get("orbit_slots", 1) > 1 else None
         self.now = 0.0
+        self.traces = RunTraces()  # paths, track estimates and neighbour changes for the run's plots
         sc = scenario.agent
         terrain = terrain_from_config(sc.terrain)
         self.fire = None if scenario.fire is None else FireWorld(scenario.fire, terrain, sc.seed)
@@ -86,6 +88,7 @@ class World:
         payload = {"targets": truth_snapshot(self.scenario.targets, t), "uavs": dict(self.uavs)}
         if self.orbits is not None:
             self.orbits.observe(t, self.uavs, payload["targets"])
+        self.traces.on_truth(t, payload["targets"])
         if self.fire is not None:
             payload["fire"] = self.fire.payload(t)
             payload["decoys"] = [list(d) for d in self.scenario.decoys]
@@ -102,6 +105,7 @@ class World:
                 continue
             if env.kind == "telemetry":
                 self._note_position(env)
+                self.traces.on_telemetry(env.origin, env.stamp, env.payload)
             elif env.kind in ("grid", "grid_evidence"):
                 if self.grid_oracle is not None:
                     (self.grid_oracle.add_grid if env.kind == "grid" else self.grid_oracle.add_evidence)(env)
@@ -156,7 +160,7 @@ class World:
 
     def summary(self) -> dict:
         out = {"targets": self.oracle.evaluator.summary(), "late_measurements": self.oracle.late,
-               "rejected": self.oracle.rejected}
+               "rejected": self.oracle.rejected, "traces": self.traces.summary()}
         closest, violations, samples = self.closest
         if samples:
             out["separation"] = {"closest_m": closest, "violations": violations, "samples": samples,

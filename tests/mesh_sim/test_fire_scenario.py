@@ -57,7 +57,9 @@ def test_maps_are_scored_against_the_truth_and_the_centralized_map(lockstep_run)
     assert maps["truth"].dtype == np.int8 and set(np.unique(maps["truth"])) <= {0, 1, 2}
     explored = np.abs(maps["central"] - 0.5) > 0.1
     assert explored.mean() > 0.2  # the entropy planner spread the cameras over a good part of the area
-    assert (run_dir / "plots" / "fire_maps.png").stat().st_size > 5000
+    for plot in ("fire_maps", "map", "traffic", "links"):  # no targets: no error, NEES or RMSE plot
+        assert (run_dir / "plots" / f"{plot}.png").stat().st_size > 5000
+    assert not (run_dir / "plots" / "errors.png").exists()
 
 
 def results_thresholds():
@@ -71,13 +73,13 @@ def test_the_fire_map_table_prints(lockstep_run):
     out = io.StringIO()
     Console(file=out, width=200).print(results.grid_table(metrics))
     text = out.getvalue()
-    assert "uav0" in text and "central" in text and "decoys rejected" in text
+    assert "uav0" in text and "central" in text and "decoys ignored" in text
 
 
 def test_rerun_recording_has_every_map_and_the_true_fire(lockstep_run):
     run_dir, _ = lockstep_run
     rows, _ = _read_rrd(run_dir / "recording.rrd")
-    for entity in ("/maps/uav0", "/maps/uav1", "/maps/truth"):
+    for entity in ("/maps/uav0", "/maps/uav1", "/maps/truth", "/maps/legend"):
         assert rows.get(entity, 0) > 0, (entity, sorted(rows))
 
 

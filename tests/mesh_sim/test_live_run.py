@@ -16,6 +16,7 @@ from pathlib import Path
 
 import psutil
 import pytest
+from rerun.chunk import RrdReader
 
 from mesh_sim.launcher import Launcher, new_run_dir
 from mesh_sim.scenario import load
@@ -63,7 +64,11 @@ def test_live_run_writes_the_run_folder(completed_run):
     on_disk = json.loads((run_dir / "metrics.json").read_text())
     assert on_disk["status"] == "completed"
     assert (run_dir / "recording.rrd").stat().st_size > 10_000
-    assert (run_dir / "plots" / "rmse.png").stat().st_size > 1000
+    for plot in ("rmse", "errors", "nees", "map", "traffic", "links"):
+        assert (run_dir / "plots" / f"{plot}.png").stat().st_size > 1000
+    reader = RrdReader(run_dir / "recording.rrd")  # the observer process's file, finished after the run
+    assert len(reader.recordings()) == len(reader.blueprints()) == 1
+    assert "/series/anees/fleet" in {chunk.entity_path for chunk in reader.stream()}
     for key in ("id", "pid", "steps", "deadline_misses", "bytes_tx", "bytes_rx", "msgs_rejected", "targets"):
         assert key in on_disk["agents"][0]
     for key in ("rmse", "anees", "rmse_ratio_to_oracle", "bytes_per_agent_per_s"):

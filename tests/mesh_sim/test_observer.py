@@ -177,8 +177,8 @@ def test_observer_logs_expected_entities_and_survives_bad_input(tmp_path):
     recordings = [(r.application_id, r.recording_id) for r in RrdReader(str(path)).recordings()]
     assert recordings == [("skymesh", obs.rec.get_recording_id())]
     rows, last = _read_rrd(path)
-    for entity in ["/world", "/world/truth", "/world/links", "/metrics/uav0/tracks", "/metrics/uav0/bytes_rx",
-                   "/metrics/uav0/bytes_seen"] + [
+    for entity in ["/world", "/world/truth", "/world/links", "/metrics/tracks/uav0", "/metrics/bytes_rx/uav0",
+                   "/metrics/bytes_seen/uav0"] + [
         f"/world/{sub}" for a in ("uav0", "uav1", "uav2")
         for sub in (f"uav/{a}", f"uav/{a}/path", f"agents/{a}/tracks", f"agents/{a}/rays")
     ]:
@@ -255,7 +255,7 @@ def test_observer_process_over_zenoh_stops_on_sigterm(zenoh_router, tmp_path):
     assert "rejected a message from uav1 (bad_type)" in text, text  # b"garbage": an int, not an envelope
     rows, _ = _read_rrd(rrd)
     for entity in ("/world/truth", "/world/uav/uav0", "/world/uav/uav1/path", "/world/agents/uav0/tracks",
-                   "/world/agents/uav1/rays", "/world/links", "/metrics/uav1/tracks"):
+                   "/world/agents/uav1/rays", "/world/links", "/metrics/tracks/uav1"):
         assert rows.get(entity, 0) > 0, (entity, sorted(rows))
     assert rows["/world/uav/uav0"] >= 5
 
@@ -301,3 +301,23 @@ def test_observer_process_without_a_router_fails_cleanly(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "mesh_sim.observer", "--fleet", "f", "--connect", "tcp/127.0.0.1:1"],
                           cwd=REPO, capture_output=True, text=True, timeout=30, check=False)
     assert proc.returncode == 2 and "nothing to do" in proc.stderr
+
+
+def test_the_live_layout_grows_with_the_fleet_and_names_each_line(tmp_path):
+    keys = Keys(f"t{uuid.uuid4().hex[:12]}")
+    obs = Observer(keys, recording_id=f"rec-{uuid.uuid4().hex[:8]}")
+    path = tmp_path / "obs.rrd"
+    obs.save(path)
+    for k in range(1, 4):
+        for agent in ("uav0", "uav1"):
+            payload = _telemetry(agent, k, 0.2 * k, [], bytes_rx=100 * k)
+            assert obs.handle(Incoming(keys.telemetry(agent), _envelope("telemetry", agent, k, 0.2 * k, payload), 0.0))
+    obs.close()
+    reader = RrdReader(str(path))
+    assert len(reader.blueprints()) == 2  # one layout as uav0 appeared, another as uav1 joined; none after
+    names = {}
+    for chunk in reader.stream():
+        batch = chunk.to_record_batch()
+        if "SeriesLines:names" in batch.schema.names:
+            names[chunk.entity_path] = batch.column("SeriesLines:names").to_pylist()[-1]
+    assert names["/metrics/tracks/uav1"] == ["uav1"] and names["/metrics/bytes_rx/uav0"] == ["uav0"]

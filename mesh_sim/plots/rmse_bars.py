@@ -1,0 +1,27 @@
+"""``rmse.png``: each target's position RMSE over the whole run, per agent beside the oracle's."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from mesh_sim.plots.figure import figure, save
+
+
+def draw(metrics: dict, folder: Path) -> Path | None:
+    """Grouped bars, one group per target (``None`` when no target was scored)."""
+    targets = sorted({t["target"] for a in metrics["agents"] for t in a.get("targets", [])})
+    if not targets:
+        return None
+    series = {a["id"]: {t["target"]: t["rmse"] for t in a.get("targets", [])} for a in metrics["agents"]}
+    series["oracle"] = {t["target"]: t["rmse"] for t in metrics["oracle"].get("targets", [])}
+    fig, axes = figure(width=7, height=4)
+    ax = axes[0, 0]
+    width = 0.8 / len(series)
+    for k, (name, values) in enumerate(series.items()):
+        ax.bar(np.arange(len(targets)) + k * width, [values.get(t) or 0.0 for t in targets], width, label=name)
+    ax.set_xticks(np.arange(len(targets)) + 0.4 - width / 2, targets)
+    ax.set_ylabel("position RMSE over the run [m]")
+    ax.legend(fontsize="small", ncols=2)
+    return save(fig, folder / "rmse.png")
