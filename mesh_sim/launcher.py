@@ -43,7 +43,9 @@ from agent.net.fleet_key import new_key_file
 from agent.net.zenoh_transport import SessionError, open_session, router_config
 from agent.runtime import atomic_file, write_json
 from mesh_sim import results
+from mesh_sim.child_logs import failure_text
 from mesh_sim.scenario import Scenario
+from mesh_sim.viewer import viewer_to_spawn, with_this_environment_on_path
 
 START_DELAY_S = 0.5  # wall seconds between "everyone is ready" and simulation time 0; chosen here
 READY_TIMEOUT_S = 120.0  # a process that is not ready by then fails the run
@@ -187,14 +189,17 @@ class Launcher:
             raise ValueError("--vehicle mavlink runs at --speed 1: the autopilots fly on the wall clock")
         if rerun not in ("save", "spawn", "off") and not rerun.startswith("connect:"):
             raise ValueError(f"--rerun must be save, spawn, off or connect:URL, got {rerun!r}")
+        if rerun == "spawn":
+            viewer_to_spawn()  # no viewer or no display: a bad environment (ViewerError), before anything starts
         self.scenario = scenario
         self.run_dir = run_dir
         self.speed = speed
         self.rerun = rerun
         self.console = console or Console(stderr=True)
         # BLAS on one thread per process unless told otherwise: on a shared machine OpenBLAS's worker threads cost
-        # 5-10x per collocation solve (tasking.collocation) and the fleet's own matrices are small
-        self.env = {"OPENBLAS_NUM_THREADS": "1", **os.environ, **(extra_env or {})}
+        # 5-10x per collocation solve (tasking.collocation) and the fleet's own matrices are small; this
+        # environment first on PATH: the observer's viewer is this environment's `rerun` (mesh_sim.viewer)
+        self.env = with_this_environment_on_path({"OPENBLAS_NUM_THREADS": "1", **os.environ, **(extra_env or {})})
         self.fleet = f"{scenario.name}-{uuid.uuid4().hex[:8]}"
         self.cameras = dict(cameras or {})  # agent name -> OpenCV video source replacing its synthetic camera
         self.vehicle = vehicle
@@ -245,7 +250,7 @@ class Launcher:
         while not all(self._ready_file(c.name).exists() for c in timed):
             for child in self.children:
                 if child.process.poll() is not None:
-                    return f"failed: {child.name} (pid {child.process.pid}) exited with code {child.process.poll()}"
+                    return f"failed: {self._failure(child, f'exited with code {child.process.poll()}')}"
             if time.time() > deadline:
                 return f"failed: not every process was ready within {READY_TIMEOUT_S:.0f} s"
             time.sleep(0.05)
@@ -330,7 +335,7 @@ class Launcher:
                     if child.role == "world":
                         if code == 0 and sim_t >= duration:
                             continue
-                        return f"failed: {child.name} (pid {child.process.pid}) exited with code {code}"
+                        return f"failed: {self._failure(child, f'exited with code {code}')}"
                     self._record_death(child, code, min(sim_t, duration))
                 agents = [c for c in self.children if c.role == "agent"]
                 if all(c.process.poll() is not None for c in agents):
@@ -349,8 +354,14 @@ class Launcher:
                         death.restarted_as)
         alive = sum(c.process.poll() is None for c in self.children if c.role == "agent")
         then = f"restarted as incarnation {death.restarted_as}" if again else "the run goes on"
-        self.console.print(f"[yellow]{child.name} (pid {death.pid}) died at t = {t:.1f} s ({death.cause}); "
-                           f"{then} with {alive} agent{'s' * (alive != 1)}")
+        self.console.print(f"{self._failure(child, f'died at t = {t:.1f} s ({death.cause})')}; "
+                           f"{then} with {alive} agent{'s' * (alive != 1)}", style="yellow", highlight=False,
+                           markup=False)
+
+    @staticmethod
+    def _failure(child: Child, what: str) -> str:
+        """What happened to ``child``, why (its log's last meaningful line) and where its log is."""
+        return failure_text(child.name, child.process.pid, what, child.log_path)
 
     def _stop_all(self) -> None:
         """SIGTERM every child still running (by PID), wait, then SIGKILL the stragglers (by PID)."""

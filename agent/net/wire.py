@@ -49,6 +49,9 @@ import numpy as np
 from agent.net import schemas
 
 SCHEMA_VERSION = 1
+#: The Zenoh encoding every message is published with (``agent.net.zenoh_transport``): the format and its version,
+#: so a subscriber knows what the bytes are before it parses them (Zenoh's default would be ``zenoh/bytes``)
+ZENOH_ENCODING = f"application/msgpack;skymesh-wire={SCHEMA_VERSION}"
 
 #: Message kinds this module knows (those with a schema). Another module extends the set without touching
 #: this one: ``decode(data, kinds=wire.KINDS | {"particles"})`` (a kind without a schema decodes as a
@@ -63,6 +66,7 @@ REASONS: frozenset[str] = frozenset(
         "bad_type",  # a value of the wrong type (incl. disallowed array dtype, unknown ext type)
         "bad_field",  # a field missing or unknown, or an out-of-range value (agent id, negative seq)
         "version",  # schema version other than SCHEMA_VERSION
+        "bad_encoding",  # a Zenoh encoding other than ZENOH_ENCODING: another format, or another version of it
         "unknown_kind",
         "bad_shape",  # array shape wrong for its role, or not matching its byte count
         "non_finite",  # NaN or inf
@@ -181,15 +185,19 @@ def decode(
     key: bytes | None = None,
     max_bytes: int = MAX_MESSAGE_BYTES,
     kinds: Set[str] | None = None,
+    encoding: str | None = None,
 ) -> Envelope:
     """Validate and unpack one message. Raises only :class:`DecodeError`, whatever ``data`` holds.
 
-    Order of checks: size, MAC (with a key, on the raw bytes before anything is parsed), envelope
+    Order of checks: the Zenoh ``encoding`` the bytes came with, when the transport has one (it must be
+    :data:`ZENOH_ENCODING`), size, MAC (with a key, on the raw bytes before anything is parsed), envelope
     structure, version, field set, field types and ranges, kind, origin, payload schema. (A ``key`` that
     is not non-empty bytes is a configuration error and raises ``ValueError`` before ``data`` is looked
     at.)"""
     if key is not None:
         _check_key(key)
+    if encoding is not None and encoding != ZENOH_ENCODING:
+        raise DecodeError("bad_encoding", f"Zenoh encoding {encoding[:80]!r}, expected {ZENOH_ENCODING!r}")
     try:
         return _decode(data, expected_origin, key, max_bytes, KINDS if kinds is None else kinds)
     except DecodeError:
