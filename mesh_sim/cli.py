@@ -112,6 +112,9 @@ def build_parser() -> argparse.ArgumentParser:
                               "flown over MAVLink UDP (live runs at --speed 1)")
         run.add_argument("--restart", action="store_true",
                          help="start an agent that dies again, as its next incarnation (live runs)")
+        run.add_argument("--zenoh-config", metavar="FILE",
+                         help="open the run's Zenoh router from this JSON5 file (a router listing its listen "
+                              "endpoints), e.g. to let a ground station on another machine attach")
         run.add_argument("--camera", action="append", default=[], metavar="AGENT=SOURCE",
                          help="replace an agent's synthetic camera with an OpenCV source (file, device index, URL), "
                               "e.g. uav0=clip.avi; repeatable")
@@ -225,10 +228,13 @@ def _run(args) -> int:
                     raise ValueError("--lockstep flies the kinematic models (the autopilots run on the wall clock)")
                 if args.restart:
                     raise ValueError("--restart is for live runs: lockstep agents do not die")
+                if args.zenoh_config:
+                    raise ValueError("--zenoh-config is for live runs: lockstep agents share an in-memory bus")
                 metrics, status = run_lockstep(scenario, run_dir, rerun=args.rerun, cameras=cameras), "completed"
             else:
                 outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console,
-                                   cameras=cameras, vehicle=args.vehicle, restart=args.restart).run()
+                                   cameras=cameras, vehicle=args.vehicle, restart=args.restart,
+                                   zenoh_config=args.zenoh_config).run()
                 metrics, status = outcome.metrics, outcome.status
     except (ValueError, OSError) as err:
         return usage_error("skymesh run", err)

@@ -1,6 +1,8 @@
 """``skymesh run``: start a whole team on this machine and collect the results.
 
-The launcher opens the Zenoh router itself (loopback, multicast scouting off, a free port), then starts
+The launcher opens the Zenoh router itself (loopback, multicast scouting off, a free port; or from a Zenoh JSON5
+file, ``--zenoh-config``: :mod:`mesh_sim.run_router`) and prints its endpoint and the fleet's name (what
+``skymesh view --fleet NAME --connect ENDPOINT`` needs to attach), then starts
 the world process, N agent processes and — unless ``--rerun off`` — the observer that writes the Rerun
 recording, each as ``python -m ...`` (never by forking this process). It shows progress, and stops
 everything on completion, on Ctrl-C and on a fatal death: SIGTERM by PID, then SIGKILL by PID after a grace
@@ -44,6 +46,7 @@ from agent.net.zenoh_transport import SessionError, open_session, router_config
 from agent.runtime import atomic_file, write_json
 from mesh_sim import results
 from mesh_sim.child_logs import failure_text
+from mesh_sim.run_router import router_from_file
 from mesh_sim.scenario import Scenario
 from mesh_sim.viewer import viewer_to_spawn, with_this_environment_on_path
 
@@ -180,7 +183,7 @@ def run_folder(base: Path, name: str) -> Iterator[Path]:
 class Launcher:
     def __init__(self, scenario: Scenario, run_dir: Path, speed: float = 1.0, rerun: str = "save",
                  console: Console | None = None, extra_env: dict | None = None, cameras: dict | None = None,
-                 vehicle: str = "kinematic", restart: bool = False):
+                 vehicle: str = "kinematic", restart: bool = False, zenoh_config: str | None = None):
         if not speed > 0:
             raise ValueError(f"--speed must be positive, got {speed}")
         if vehicle not in VEHICLES:
@@ -204,6 +207,7 @@ class Launcher:
         self.cameras = dict(cameras or {})  # agent name -> OpenCV video source replacing its synthetic camera
         self.vehicle = vehicle
         self.restart = restart  # start a dead agent again, as its next incarnation
+        self.zenoh_config = zenoh_config  # a Zenoh JSON5 file for the run's router (mesh_sim.run_router), or None
         self.children: list[Child] = []
         self.startup_s: dict[str, float] = {}
         self.deaths: list[Death] = []
@@ -215,7 +219,9 @@ class Launcher:
         scenario_file = self.run_dir / "scenario.json"
         write_json(scenario_file, self.scenario.raw)
         (self.run_dir / "logs").mkdir(exist_ok=True)
-        router, endpoint = open_router()
+        router, endpoint = open_router() if self.zenoh_config is None else router_from_file(self.zenoh_config)
+        self.console.print(f"fleet {self.fleet} at {endpoint}; attach a ground station with: "
+                           f"skymesh view --fleet {self.fleet} --connect {endpoint}", highlight=False, soft_wrap=True)
         status = "completed"
         try:
             with _sigterm_raises():
