@@ -39,7 +39,6 @@ from pathlib import Path
 
 import zenoh
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from agent.net.fleet_key import new_key_file
 from agent.net.zenoh_transport import SessionError, open_session, router_config
@@ -48,6 +47,7 @@ from mesh_sim import results
 from mesh_sim.child_logs import failure_text
 from mesh_sim.run_router import router_from_file
 from mesh_sim.scenario import Scenario
+from mesh_sim.sim_progress import sim_progress
 from mesh_sim.viewer import viewer_to_spawn, with_this_environment_on_path
 
 START_DELAY_S = 0.5  # wall seconds between "everyone is ready" and simulation time 0; chosen here
@@ -325,15 +325,12 @@ class Launcher:
         """Wait for the agents to finish; return the run's status. A dead agent, observer or autopilot is
         recorded and the run goes on; the world dying before the end, or every agent dying, fails it."""
         duration = self.scenario.agent.duration
-        progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
-                            TextColumn("t={task.completed:.0f}/{task.total:.0f} s"), TimeRemainingColumn(),
-                            console=self.console, transient=True)
-        with progress:
-            task = progress.add_task(f"{self.scenario.name}: {self.scenario.agent.agents} agents", total=duration)
+        title = f"{self.scenario.name}: {self.scenario.agent.agents} agents"
+        with sim_progress(self.console, title, duration) as advance:
             while True:
                 time.sleep(0.2)
                 sim_t = max(0.0, (time.time() - epoch) * self.speed)
-                progress.update(task, completed=min(sim_t, duration))
+                advance(sim_t)
                 for child in list(self.children):  # a restart adds one
                     code = child.process.poll()
                     if code is None or (code == 0 and child.role == "agent") or self._dead(child):
