@@ -235,6 +235,7 @@ class CameraSensor(BearingSource):
                 self.stats.outcomes[f"frame_{result.error}"] += 1
             elif self.last_quality.failed:  # a frame of a failed source: no bearings from it
                 self.stats.outcomes["video_failed"] += 1
+                self._label(np.empty((0, 2)), labels)  # its visible targets count as missed
             else:
                 self.stats.frames_ok += 1
                 pixels = self._kept(result.detections)

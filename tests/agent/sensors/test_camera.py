@@ -205,11 +205,11 @@ BAD_FRAMES = [None, np.zeros((0, 0, 3), np.uint8), np.zeros((100, 100, 3), np.ui
 
 
 def test_bad_frames_are_counted_by_reason_and_never_raise():
-    source = ScriptedSource([*BAD_FRAMES, good_frame()])
+    source = ScriptedSource([good_frame(), *BAD_FRAMES])  # good first: after the bad ones the source has failed
     sensor = CameraSensor(CameraSensorConfig(), seed=0, source=source)
     out = [sensor.detect(0.2 * k, state(0.2 * k), []) for k in range(len(BAD_FRAMES) + 2)]
-    assert all(not bearings for bearings in out[:-2])
-    assert len(out[-2]) == 1 and out[-2][0].truth_id is None  # the good frame: a detection, no truth label
+    assert all(not bearings for bearings in out[1:])
+    assert len(out[0]) == 1 and out[0][0].truth_id is None  # the good frame: a detection, no truth label
     assert sensor.outcomes == Counter({"read_failed": 2, "frame_empty": 1, "frame_wrong_shape": 2,
                                        "frame_corrupt": 1, "frame_wrong_dtype": 1})
     assert sensor.metrics()["frames_ok"] == 1
