@@ -238,7 +238,7 @@ def test_a_pose_that_never_arrives_times_out():
 
 
 def test_the_agent_counts_bad_frames_in_its_metrics(tmp_path):
-    scenario = load("camera", agents=1, duration=2.0).agent
+    scenario = load("default", agents=1, duration=2.0).agent
     keys = Keys(f"t-{uuid.uuid4().hex[:8]}")
     bus = InMemoryBus()
     agent = Agent("uav0", 0, scenario, bus.endpoint("uav0", keys.agent_subscriptions()), keys, seed=0,
@@ -289,14 +289,14 @@ def test_a_source_that_cannot_be_opened_is_a_clear_error(tmp_path):
     rc = skymesh(["run", "--camera", "uav9=x.avi", "--agents", "2", "--out", str(tmp_path), "--rerun", "off"])
     assert rc == 2
     out = subprocess.run([sys.executable, "-m", "agent", "--id", "uav0", "--index", "0", "--fleet", "x",
-                          "--scenario", str(load("camera").path), "--connect", "tcp/127.0.0.1:9",
+                          "--scenario", str(load("default").path), "--connect", "tcp/127.0.0.1:9",
                           "--camera", str(tmp_path / "missing.avi")],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "cannot open camera source" in out.stderr
 
 
 def test_skymesh_run_lockstep_with_a_camera_file(tmp_path, red_target_video, capsys):
-    rc = skymesh(["run", "--lockstep", "--scenario", "camera", "--agents", "2", "--duration", "4", "--rerun", "off",
+    rc = skymesh(["run", "--lockstep", "--scenario", "default", "--agents", "2", "--duration", "4", "--rerun", "off",
                   "--out", str(tmp_path), "--camera", f"uav0={red_target_video}"])
     assert rc == 0
     (run_dir,) = tmp_path.iterdir()
@@ -312,7 +312,7 @@ def test_skymesh_run_lockstep_with_a_camera_file(tmp_path, red_target_video, cap
 
 
 def test_lockstep_run_with_the_camera_tracks_every_target(tmp_path):
-    scenario = load("camera", duration=45.0)
+    scenario = load("default", duration=45.0)
     metrics = run_lockstep(scenario, tmp_path)
     assert metrics["fleet"]["targets_tracked_by_every_agent"], [a["targets"] for a in metrics["agents"]]
     for agent in metrics["agents"]:
@@ -326,7 +326,7 @@ def test_lockstep_run_with_the_camera_tracks_every_target(tmp_path):
 
 
 def test_telemetry_carries_the_video_quality():
-    scenario = load("camera", agents=1, duration=2.0).agent
+    scenario = load("default", agents=1, duration=2.0).agent
     keys = Keys(f"t-{uuid.uuid4().hex[:8]}")
     bus = InMemoryBus()
     agent = Agent("uav0", 0, scenario, bus.endpoint("uav0", keys.agent_subscriptions()), keys, seed=0)
