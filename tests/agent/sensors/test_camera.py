@@ -253,17 +253,20 @@ def test_the_agent_counts_bad_frames_in_its_metrics(tmp_path):
 # ------------------------------------------------------------------------------------ external video
 
 
-@pytest.fixture(scope="module")
-def red_target_video(tmp_path_factory) -> str:
-    """An MJPG .avi of a nadir camera 80 m above a red disc at (3, 2): 12 frames, 640 x 480."""
-    path = tmp_path_factory.mktemp("video") / "red_target.avi"
+def write_video(path, frames) -> str:
+    """``frames`` (RGB, 640 x 480) as an MJPG .avi at 5 frames per second; its path."""
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 5.0, (640, 480))
     assert writer.isOpened()
-    frame = good_frame()
-    for _ in range(12):
+    for frame in frames:
         writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
     writer.release()
     return str(path)
+
+
+@pytest.fixture(scope="module")
+def red_target_video(tmp_path_factory) -> str:
+    """An MJPG .avi of a nadir camera 80 m above a red disc at (3, 2): 12 frames, 640 x 480."""
+    return write_video(tmp_path_factory.mktemp("video") / "red_target.avi", [good_frame()] * 12)
 
 
 def test_a_video_file_replaces_the_synthetic_camera(red_target_video):

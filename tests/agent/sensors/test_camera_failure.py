@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 
-import cv2
 import numpy as np
 import pytest
 
@@ -15,7 +14,7 @@ from agent.sensors.camera_config import CameraSensorConfig
 from agent.sensors.video_source import VideoSource
 from mesh_sim import cli
 from perception.quality import VideoQuality
-from tests.agent.sensors.test_camera import good_frame, state
+from tests.agent.sensors.test_camera import good_frame, state, write_video
 
 GOOD, BANDED = 8, 14  # frames of each kind in the file
 
@@ -33,13 +32,9 @@ def banded(frame: np.ndarray) -> np.ndarray:
 @pytest.fixture(scope="module")
 def failing_video(tmp_path_factory) -> str:
     """GOOD clean frames of a red disc, then BANDED banded ones, the file cut at 85 % of its bytes."""
-    path = tmp_path_factory.mktemp("video") / "failing.avi"
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 5.0, (640, 480))
-    assert writer.isOpened()
     frame = good_frame()
-    for image in [frame] * GOOD + [banded(frame)] * BANDED:
-        writer.write(cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-    writer.release()
+    path = tmp_path_factory.mktemp("video") / "failing.avi"
+    write_video(path, [frame] * GOOD + [banded(frame)] * BANDED)
     data = path.read_bytes()
     path.write_bytes(data[: int(0.85 * len(data))])
     return str(path)
