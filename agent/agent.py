@@ -139,8 +139,8 @@ class Agent:
         elif origin not in self.fleet:  # before any per-peer state: a made-up name costs the agent nothing
             return self._reject("?", "unknown_origin")
         try:
-            env = wire.decode(item.data, expected_origin=origin, key=self.fleet_key, kinds=self.kinds,
-                              encoding=item.encoding)
+            wire.check_encoding(item.encoding)
+            env = wire.decode(item.data, expected_origin=origin, key=self.fleet_key, kinds=self.kinds)
         except wire.DecodeError as err:
             return self._reject(origin or "world", err.reason)
         verdict = self.window.admit(env.origin, env.kind, env.seq, t, env.stamp)

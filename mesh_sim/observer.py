@@ -146,8 +146,8 @@ class Observer:
             return self._reject("?", "bad_key")
         peer = origin or "world"
         try:
-            env = wire.decode(incoming.data, expected_origin=origin, key=self.fleet_key, kinds=wire.KINDS | {kind},
-                              encoding=incoming.encoding)
+            wire.check_encoding(incoming.encoding)
+            env = wire.decode(incoming.data, expected_origin=origin, key=self.fleet_key, kinds=wire.KINDS | {kind})
         except wire.DecodeError as err:
             return self._reject(peer, err.reason)
         if env.kind != kind:

@@ -185,25 +185,29 @@ def decode(
     key: bytes | None = None,
     max_bytes: int = MAX_MESSAGE_BYTES,
     kinds: Set[str] | None = None,
-    encoding: str | None = None,
 ) -> Envelope:
     """Validate and unpack one message. Raises only :class:`DecodeError`, whatever ``data`` holds.
 
-    Order of checks: the Zenoh ``encoding`` the bytes came with, when the transport has one (it must be
-    :data:`ZENOH_ENCODING`), size, MAC (with a key, on the raw bytes before anything is parsed), envelope
+    Order of checks: size, MAC (with a key, on the raw bytes before anything is parsed), envelope
     structure, version, field set, field types and ranges, kind, origin, payload schema. (A ``key`` that
     is not non-empty bytes is a configuration error and raises ``ValueError`` before ``data`` is looked
     at.)"""
     if key is not None:
         _check_key(key)
-    if encoding is not None and encoding != ZENOH_ENCODING:
-        raise DecodeError("bad_encoding", f"Zenoh encoding {encoding[:80]!r}, expected {ZENOH_ENCODING!r}")
     try:
         return _decode(data, expected_origin, key, max_bytes, KINDS if kinds is None else kinds)
     except DecodeError:
         raise
     except Exception as exc:  # a safety net: the agent must never crash on input (DESIGN.md §5)
         raise DecodeError("malformed", f"unexpected {type(exc).__name__} while validating") from None
+
+
+def check_encoding(encoding: str | None) -> None:
+    """:class:`DecodeError` ``bad_encoding`` unless the Zenoh encoding a message came with is :data:`ZENOH_ENCODING`
+    (``None``: a transport without encodings, the in-memory bus). Checked before :func:`decode`: bytes of another
+    format, or of another version of this one, are not parsed."""
+    if encoding is not None and encoding != ZENOH_ENCODING:
+        raise DecodeError("bad_encoding", f"Zenoh encoding {encoding[:80]!r}, expected {ZENOH_ENCODING!r}")
 
 
 def encoded_size(envelope: Envelope, key: bytes | None = None) -> int:

@@ -19,7 +19,7 @@ behind, the oldest are overwritten (a slow agent must not grow without bound). Z
 have been overwritten.
 
 Every sample is published with the encoding :data:`agent.net.wire.ZENOH_ENCODING` (the format and its version) and
-handed over with the encoding it arrived with, which the receiver's ``wire.decode`` checks.
+handed over with the encoding it arrived with, which the receiver checks (``wire.check_encoding``).
 """
 
 from __future__ import annotations

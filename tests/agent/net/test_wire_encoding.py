@@ -34,11 +34,11 @@ def test_the_encoding_names_the_format_and_its_version():
 @pytest.mark.parametrize("encoding", WRONG)
 def test_a_wrong_encoding_is_rejected_with_its_reason(encoding):
     with pytest.raises(wire.DecodeError) as err:
-        wire.decode(_envelope(), encoding=encoding)
+        wire.check_encoding(encoding)
     assert err.value.reason == "bad_encoding"
     assert str(err.value) == f"bad_encoding: Zenoh encoding {encoding!r}, expected 'application/msgpack;skymesh-wire=1'"
-    assert wire.decode(_envelope(), encoding=wire.ZENOH_ENCODING).origin == "uav1"
-    assert wire.decode(_envelope()).origin == "uav1"  # the in-memory bus has no encoding: nothing to check
+    wire.check_encoding(wire.ZENOH_ENCODING)
+    wire.check_encoding(None)  # the in-memory bus has no encoding: nothing to check
 
 
 def _drain_until(transport: ZenohTransport, key: str, count: int, timeout: float = 20.0) -> list:
