@@ -10,9 +10,14 @@
   — a team of agent processes over Zenoh (``mesh_sim.launcher``); with no arguments, the default scenario.
   ``--vehicle mavlink`` starts a ``skymesh autopilot`` per agent and flies each agent over MAVLink UDP.
   ``--camera uav0=clip.avi`` replaces that agent's synthetic camera with an OpenCV video source (file, device
-  index, stream URL); a source that cannot be opened is a usage error before anything starts;
+  index, stream URL); a source that cannot be opened is a usage error before anything starts. A live run prints
+  its fleet name and router endpoint first (the ``skymesh view`` line that attaches to it); ``--zenoh-config FILE``
+  opens its router from a Zenoh JSON5 file (``mesh_sim.run_router``). A completed run whose agents missed more than
+  1 % of their deadlines or whose video source failed ends "completed with warnings" (``mesh_sim.run_health``);
+  a bad ``--duration``, ``--loss``, ... names the flag (``mesh_sim.run_overrides``);
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
-* ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``);
+* ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``), with this
+  environment's Rerun viewer (``mesh_sim.viewer``) unless ``--save`` or ``--connect-viewer`` is given;
 * ``skymesh compare BEFORE AFTER [--plain] [--limit N]`` — compare two run folders exactly, volatile fields
   (pids, CPU and wall times, ...) aside (``mesh_sim.run_compare``): exit 0 identical, 1 different;
 * ``skymesh compare --tree BEFORE_ROOT AFTER_ROOT [--details]`` — pair the run folders of two roots by
