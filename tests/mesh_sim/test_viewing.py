@@ -70,6 +70,13 @@ def test_children_get_this_environment_first_on_path():
     assert viewer.with_this_environment_on_path({})["PATH"] == str(Path(sys.executable).parent)
 
 
+def test_the_launchers_children_get_this_environment_first_on_path(tmp_path, monkeypatch):
+    """Bad input: the launcher started from a shell whose PATH lacks the environment (not activated)."""
+    monkeypatch.setenv("PATH", "/usr/bin:/bin")
+    launcher = Launcher(load("default", agents=1), tmp_path, rerun="off", console=Console(file=io.StringIO()))
+    assert launcher.env["PATH"] == os.pathsep.join([str(Path(sys.executable).parent), "/usr/bin", "/bin"])
+
+
 def test_skymesh_view_without_a_display_is_one_line_exit_2_before_zenoh(capsys, monkeypatch):
     """Bad input: ``skymesh view`` (a live viewer) with DISPLAY and WAYLAND_DISPLAY unset; the router endpoint is
     dead too, but the display is what is said (checked first, and no gRPC flush traceback hides it)."""
