@@ -140,6 +140,7 @@ class Agent:
         elif origin not in self.fleet:  # before any per-peer state: a made-up name costs the agent nothing
             return self._reject("?", "unknown_origin")
         try:
+            wire.check_encoding(item.encoding)
             env = wire.decode(item.data, expected_origin=origin, key=self.fleet_key, kinds=self.kinds, fleet=self.fleet)
         except wire.DecodeError as err:
             return self._reject(origin or "world", err.reason)
@@ -202,8 +203,7 @@ class Agent:
 
     def _publish_topology(self, t: float) -> None:
         """Who this agent hears, to its peers when it changed or a beacon is due (:mod:`agent.net.topology`)."""
-        payload = self.topology.outgoing(t)
-        if payload is not None:
+        if (payload := self.topology.outgoing(t)) is not None:
             self._publish("topology", self.keys.topology(self.id), t, payload)
 
     def _publish_telemetry(self, t: float, state) -> None:

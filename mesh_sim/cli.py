@@ -10,9 +10,14 @@
   — a team of agent processes over Zenoh (``mesh_sim.launcher``); with no arguments, the default scenario.
   ``--vehicle mavlink`` starts a ``skymesh autopilot`` per agent and flies each agent over MAVLink UDP.
   ``--camera uav0=clip.avi`` replaces that agent's synthetic camera with an OpenCV video source (file, device
-  index, stream URL); a source that cannot be opened is a usage error before anything starts;
+  index, stream URL); a source that cannot be opened is a usage error before anything starts. A live run prints
+  its fleet name and router endpoint first (the ``skymesh view`` line that attaches to it); ``--zenoh-config FILE``
+  opens its router from a Zenoh JSON5 file (``mesh_sim.run_router``). A completed run whose agents missed more than
+  1 % of their deadlines or whose video source failed ends "completed with warnings" (``mesh_sim.run_health``);
+  a bad ``--duration``, ``--loss``, ... names the flag (``mesh_sim.run_overrides``);
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
-* ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``);
+* ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``), with this
+  environment's Rerun viewer (``mesh_sim.viewer``) unless ``--save`` or ``--connect-viewer`` is given;
 * ``skymesh compare BEFORE AFTER [--plain] [--limit N]`` — compare two run folders exactly, volatile fields
   (pids, CPU and wall times, ...) aside (``mesh_sim.run_compare``): exit 0 identical, 1 different;
 * ``skymesh compare --tree BEFORE_ROOT AFTER_ROOT [--details]`` — pair the run folders of two roots by
@@ -112,6 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
                               "flown over MAVLink UDP (live runs at --speed 1)")
         run.add_argument("--restart", action="store_true",
                          help="start an agent that dies again, as its next incarnation (live runs)")
+        run.add_argument("--zenoh-config", metavar="FILE",
+                         help="open the run's Zenoh router from this JSON5 file (a router listing its listen "
+                              "endpoints), e.g. to let a ground station on another machine attach")
         run.add_argument("--camera", action="append", default=[], metavar="AGENT=SOURCE",
                          help="replace an agent's synthetic camera with an OpenCV source (file, device index, URL), "
                               "e.g. uav0=clip.avi; repeatable")
@@ -207,18 +215,13 @@ def _run(args) -> int:
     from mesh_sim.launcher import Launcher, run_folder
     from mesh_sim.lockstep import run_lockstep
     from mesh_sim.results import grid_table, summary_table
-    from mesh_sim.scenario import load
+    from mesh_sim.run_health import WITH_WARNINGS, judge
+    from mesh_sim.run_overrides import given, load_with_flags
+    from mesh_sim.sim_progress import sim_progress
 
     console = make_console()
-    overrides = {"agents": args.agents, "duration": args.duration, "seed": args.seed}
-    if args.policy:
-        overrides["tracking"] = {"policy": args.policy}
-    radio = {key: value for key, value in (("topology", args.topology), ("loss", args.loss),
-                                           ("delay_ms", args.latency), ("rate", args.bandwidth)) if value is not None}
-    if radio:
-        overrides["radio"] = radio
     try:
-        scenario = load(args.scenario, **overrides)
+        scenario = load_with_flags(args.scenario, given(args))
         cameras = _cameras(args.camera, scenario.agent.agents)
         with run_folder(args.out, scenario.name) as run_dir:
             if args.lockstep:
@@ -228,23 +231,45 @@ def _run(args) -> int:
                     raise ValueError("--lockstep flies the kinematic models (the autopilots run on the wall clock)")
                 if args.restart:
                     raise ValueError("--restart is for live runs: lockstep agents do not die")
-                metrics, status = run_lockstep(scenario, run_dir, rerun=args.rerun, cameras=cameras), "completed"
+                if args.zenoh_config:
+                    raise ValueError("--zenoh-config is for live runs: lockstep agents share an in-memory bus")
+                with sim_progress(make_console(stderr=True), f"{scenario.name}: {scenario.agent.agents} agents "
+                                  "(lockstep)", scenario.agent.duration) as advance:
+                    metrics = run_lockstep(scenario, run_dir, rerun=args.rerun, cameras=cameras, advance=advance)
             else:
                 outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console,
-                                   cameras=cameras, vehicle=args.vehicle, restart=args.restart).run()
-                metrics, status = outcome.metrics, outcome.status
+                                   cameras=cameras, vehicle=args.vehicle, restart=args.restart,
+                                   zenoh_config=args.zenoh_config).run()
+                metrics = outcome.metrics
+            metrics = judge(run_dir, metrics)  # deadlines missed, a failed sensor: "completed with warnings"
     except (ValueError, OSError) as err:
         return usage_error("skymesh run", err)
     console.print(summary_table(metrics))
     if (fire_map := grid_table(metrics)) is not None:
         console.print(fire_map)
+    status = metrics["status"]
+    for warning in metrics.get("warnings", []):
+        console.print(f"warning: {warning}", style="yellow", highlight=False)
+    if status.startswith("failed"):
+        console.print(status, style="bold red", highlight=False)
     console.print(f"Results: {run_dir}  (metrics.json, plots/"
                   + (", logs/" if not args.lockstep else "")
-                  + (", recording.rrd: open with `rerun recording.rrd`" if args.rerun == "save" else "") + ")",
+                  + (f", recording.rrd: open with `{_viewer()} {run_dir / 'recording.rrd'}`" if args.rerun == "save"
+                     else "") + ")",
                   highlight=False)
     if status in STOPPED_BY:
         return STOPPED_BY[status]
-    return 0 if status == "completed" else 1
+    return 0 if status in ("completed", WITH_WARNINGS) else 1
+
+
+def _viewer() -> str:
+    """The Rerun viewer to open a recording with: this environment's (``mesh_sim.viewer``), else ``rerun``."""
+    from mesh_sim.viewer import ViewerError, viewer_executable
+
+    try:
+        return viewer_executable()
+    except ViewerError:
+        return "rerun"
 
 
 def _cameras(specs: list[str], agents: int) -> dict[str, str]:

@@ -1,6 +1,8 @@
 """``skymesh run``: start a whole team on this machine and collect the results.
 
-The launcher opens the Zenoh router itself (loopback, multicast scouting off, a free port), then starts
+The launcher opens the Zenoh router itself (loopback, multicast scouting off, a free port; or from a Zenoh JSON5
+file, ``--zenoh-config``: :mod:`mesh_sim.run_router`) and prints its endpoint and the fleet's name (what
+``skymesh view --fleet NAME --connect ENDPOINT`` needs to attach), then starts
 the world process, N agent processes and — unless ``--rerun off`` — the observer that writes the Rerun
 recording, each as ``python -m ...`` (never by forking this process). It shows progress, and stops
 everything on completion, on Ctrl-C and on a fatal death: SIGTERM by PID, then SIGKILL by PID after a grace
@@ -37,13 +39,16 @@ from pathlib import Path
 
 import zenoh
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from agent.net.fleet_key import new_key_file
 from agent.net.zenoh_transport import SessionError, open_session, router_config
 from agent.runtime import atomic_file, write_json
 from mesh_sim import results
+from mesh_sim.child_logs import failure_text
+from mesh_sim.run_router import router_from_file
 from mesh_sim.scenario import Scenario
+from mesh_sim.sim_progress import sim_progress
+from mesh_sim.viewer import viewer_to_spawn, with_this_environment_on_path
 
 START_DELAY_S = 0.5  # wall seconds between "everyone is ready" and simulation time 0; chosen here
 READY_TIMEOUT_S = 120.0  # a process that is not ready by then fails the run
@@ -178,7 +183,7 @@ def run_folder(base: Path, name: str) -> Iterator[Path]:
 class Launcher:
     def __init__(self, scenario: Scenario, run_dir: Path, speed: float = 1.0, rerun: str = "save",
                  console: Console | None = None, extra_env: dict | None = None, cameras: dict | None = None,
-                 vehicle: str = "kinematic", restart: bool = False):
+                 vehicle: str = "kinematic", restart: bool = False, zenoh_config: str | None = None):
         if not speed > 0:
             raise ValueError(f"--speed must be positive, got {speed}")
         if vehicle not in VEHICLES:
@@ -187,18 +192,22 @@ class Launcher:
             raise ValueError("--vehicle mavlink runs at --speed 1: the autopilots fly on the wall clock")
         if rerun not in ("save", "spawn", "off") and not rerun.startswith("connect:"):
             raise ValueError(f"--rerun must be save, spawn, off or connect:URL, got {rerun!r}")
+        if rerun == "spawn":
+            viewer_to_spawn()  # no viewer or no display: a bad environment (ViewerError), before anything starts
         self.scenario = scenario
         self.run_dir = run_dir
         self.speed = speed
         self.rerun = rerun
         self.console = console or Console(stderr=True)
         # BLAS on one thread per process unless told otherwise: on a shared machine OpenBLAS's worker threads cost
-        # 5-10x per collocation solve (tasking.collocation) and the fleet's own matrices are small
-        self.env = {"OPENBLAS_NUM_THREADS": "1", **os.environ, **(extra_env or {})}
+        # 5-10x per collocation solve (tasking.collocation) and the fleet's own matrices are small; this
+        # environment first on PATH: the observer's viewer is this environment's `rerun` (mesh_sim.viewer)
+        self.env = with_this_environment_on_path({"OPENBLAS_NUM_THREADS": "1", **os.environ, **(extra_env or {})})
         self.fleet = f"{scenario.name}-{uuid.uuid4().hex[:8]}"
         self.cameras = dict(cameras or {})  # agent name -> OpenCV video source replacing its synthetic camera
         self.vehicle = vehicle
         self.restart = restart  # start a dead agent again, as its next incarnation
+        self.zenoh_config = zenoh_config  # a Zenoh JSON5 file for the run's router (mesh_sim.run_router), or None
         self.children: list[Child] = []
         self.startup_s: dict[str, float] = {}
         self.deaths: list[Death] = []
@@ -210,7 +219,9 @@ class Launcher:
         scenario_file = self.run_dir / "scenario.json"
         write_json(scenario_file, self.scenario.raw)
         (self.run_dir / "logs").mkdir(exist_ok=True)
-        router, endpoint = open_router()
+        router, endpoint = open_router() if self.zenoh_config is None else router_from_file(self.zenoh_config)
+        self.console.print(f"fleet {self.fleet} at {endpoint}; attach a ground station with: "
+                           f"skymesh view --fleet {self.fleet} --connect {endpoint}", highlight=False, soft_wrap=True)
         status = "completed"
         try:
             with _sigterm_raises():
@@ -245,7 +256,7 @@ class Launcher:
         while not all(self._ready_file(c.name).exists() for c in timed):
             for child in self.children:
                 if child.process.poll() is not None:
-                    return f"failed: {child.name} (pid {child.process.pid}) exited with code {child.process.poll()}"
+                    return f"failed: {self._failure(child, f'exited with code {child.process.poll()}')}"
             if time.time() > deadline:
                 return f"failed: not every process was ready within {READY_TIMEOUT_S:.0f} s"
             time.sleep(0.05)
@@ -314,15 +325,12 @@ class Launcher:
         """Wait for the agents to finish; return the run's status. A dead agent, observer or autopilot is
         recorded and the run goes on; the world dying before the end, or every agent dying, fails it."""
         duration = self.scenario.agent.duration
-        progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
-                            TextColumn("t={task.completed:.0f}/{task.total:.0f} s"), TimeRemainingColumn(),
-                            console=self.console, transient=True)
-        with progress:
-            task = progress.add_task(f"{self.scenario.name}: {self.scenario.agent.agents} agents", total=duration)
+        title = f"{self.scenario.name}: {self.scenario.agent.agents} agents"
+        with sim_progress(self.console, title, duration) as advance:
             while True:
                 time.sleep(0.2)
                 sim_t = max(0.0, (time.time() - epoch) * self.speed)
-                progress.update(task, completed=min(sim_t, duration))
+                advance(sim_t)
                 for child in list(self.children):  # a restart adds one
                     code = child.process.poll()
                     if code is None or (code == 0 and child.role == "agent") or self._dead(child):
@@ -330,7 +338,7 @@ class Launcher:
                     if child.role == "world":
                         if code == 0 and sim_t >= duration:
                             continue
-                        return f"failed: {child.name} (pid {child.process.pid}) exited with code {code}"
+                        return f"failed: {self._failure(child, f'exited with code {code}')}"
                     self._record_death(child, code, min(sim_t, duration))
                 agents = [c for c in self.children if c.role == "agent"]
                 if all(c.process.poll() is not None for c in agents):
@@ -349,8 +357,14 @@ class Launcher:
                         death.restarted_as)
         alive = sum(c.process.poll() is None for c in self.children if c.role == "agent")
         then = f"restarted as incarnation {death.restarted_as}" if again else "the run goes on"
-        self.console.print(f"[yellow]{child.name} (pid {death.pid}) died at t = {t:.1f} s ({death.cause}); "
-                           f"{then} with {alive} agent{'s' * (alive != 1)}")
+        self.console.print(f"{self._failure(child, f'died at t = {t:.1f} s ({death.cause})')}; "
+                           f"{then} with {alive} agent{'s' * (alive != 1)}", style="yellow", highlight=False,
+                           markup=False)
+
+    @staticmethod
+    def _failure(child: Child, what: str) -> str:
+        """What happened to ``child``, why (its log's last meaningful line) and where its log is."""
+        return failure_text(child.name, child.process.pid, what, child.log_path)
 
     def _stop_all(self) -> None:
         """SIGTERM every child still running (by PID), wait, then SIGKILL the stragglers (by PID)."""

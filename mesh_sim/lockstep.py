@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import time
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 
 from agent.agent import Agent
@@ -27,9 +28,11 @@ from mesh_sim.scenario import Scenario
 from mesh_sim.world import World
 
 
-def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off", cameras: dict | None = None) -> dict:
+def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off", cameras: dict | None = None,
+                 advance: Callable[[float], None] = lambda t: None) -> dict:
     """Run ``scenario`` to completion in this process; returns the merged metrics. ``cameras`` maps an agent
-    name to an OpenCV video source (file, device, URL) that replaces its synthetic camera."""
+    name to an OpenCV video source (file, device, URL) that replaces its synthetic camera; ``advance(t)`` is
+    called after each step with its simulation time (a progress bar: :mod:`mesh_sim.sim_progress`)."""
     sc = scenario.agent
     keys = Keys(f"{scenario.name}-{uuid.uuid4().hex[:8]}")
     bus = InMemoryBus()
@@ -62,6 +65,7 @@ def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off", cameras:
         if observer is not None:
             for item in watch.drain():
                 observer.handle(item)
+        advance(t)
     if observer is not None:
         observer.close()
     for agent in agents:

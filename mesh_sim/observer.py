@@ -39,8 +39,8 @@ Run as a process (the launcher stops it with SIGTERM; it also exits when its par
 
 ``--parent-pid PID`` makes it exit when PID is no longer its parent (default: its parent at start).
 
-``--spawn`` starts a live Rerun viewer; it needs the ``rerun`` viewer binary and a display (on a
-headless machine the viewer dies and shutdown waits several seconds — never use it in tests).
+``--spawn`` starts this environment's Rerun viewer (``mesh_sim.viewer``: the ``rerun`` beside the Python running
+this, else on ``PATH``); no viewer or no display is one line and exit code 2 before anything starts.
 
 Rerun is imported in the ``observer*`` modules and nowhere else in the project.
 """
@@ -69,6 +69,7 @@ from mesh_sim.observer_blueprint import LIVE_METRICS, MAPS_LEGEND, fleet_bluepri
 from mesh_sim.observer_geometry import RAY_LENGTH, cov_to_ellipsoid, nearest_truth, ray_end
 from mesh_sim.observer_grids import LEGEND, GridImages
 from mesh_sim.observer_messages import parse_telemetry, parse_truth
+from mesh_sim.viewer import viewer_to_spawn
 
 log = logging.getLogger("skymesh.observer")
 
@@ -124,9 +125,9 @@ class Observer:
         self._add_sink(rr.GrpcSink(url))
 
     def spawn(self, port: int = 9876) -> None:
-        """Start a live Rerun viewer and stream to it. Needs the ``rerun`` binary and a display
-        (X11/Wayland); on a headless machine the viewer dies and this returns after ~11 s."""
-        self.rec.spawn(port=port, connect=False)
+        """Start this environment's Rerun viewer (:func:`mesh_sim.viewer.viewer_to_spawn`) and stream to it; a
+        :class:`~mesh_sim.viewer.ViewerError` when there is no viewer or no display."""
+        rr.spawn(port=port, connect=False, executable_path=viewer_to_spawn(), recording=self.rec)
         self._add_sink(rr.GrpcSink(f"rerun+http://127.0.0.1:{port}/proxy"))
 
     def _add_sink(self, sink) -> None:
@@ -137,6 +138,8 @@ class Observer:
         """Flush everything to the sinks and close them (an .rrd is complete, with its footer, after this)."""
         try:
             self.rec.flush(timeout_sec=10.0)
+        except RuntimeError as err:  # a viewer closed by its user: the other sinks are flushed, say it in one line
+            log.warning("observer: the Rerun viewer went away (%s)", " ".join(str(err).split()))
         finally:
             self.rec.disconnect()
 
@@ -157,6 +160,7 @@ class Observer:
             return self._reject("?", "bad_key")
         peer = origin or "world"
         try:
+            wire.check_encoding(incoming.encoding)
             env = wire.decode(incoming.data, expected_origin=origin, key=self.fleet_key, kinds=wire.KINDS | {kind})
         except wire.DecodeError as err:
             return self._reject(peer, err.reason)
@@ -373,11 +377,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("observer: nothing to do: give --save, --connect-viewer or --spawn", file=sys.stderr)
         return 2
     try:
+        if args.spawn:  # before the Zenoh session: no viewer or no display is said first, in one line
+            viewer_to_spawn()
         obs = run_observer(args.fleet, args.connect, args.zenoh_config, args.save, args.connect_viewer, args.spawn,
                            args.duration, recording_id=args.recording_id, application_id=args.application_id,
                            parent_pid=args.parent_pid,
                            fleet_key=read_key_file(args.fleet_key_file) if args.fleet_key_file else None)
-    except (OSError, ValueError) as err:  # OSError: no router at the endpoint (SessionError), an unwritable --save
+    except (OSError, ValueError) as err:  # OSError: no router (SessionError), an unwritable --save, no viewer
         return usage_error("observer", err)
     rejected = ", ".join(f"{r}={n}" for r, n in sorted(obs.rejected.items())) or "none"
     log.info("observer: %d messages logged; rejected: %s%s", obs.accepted, rejected,

@@ -99,6 +99,7 @@ class World:
         """Feed every agent's raw bearings to the oracle, then score it."""
         for item in self.transport.drain():
             try:
+                wire.check_encoding(item.encoding)
                 env = wire.decode(item.data, expected_origin=self.keys.parse(item.key)[-1], key=self.fleet_key)
             except (wire.DecodeError, ValueError):
                 self.oracle.rejected += 1

@@ -16,6 +16,7 @@ class Incoming:
     key: str
     data: bytes
     received_at: float  # wall clock [s]
+    encoding: str | None = None  # the Zenoh encoding it came with (agent.net.wire.ZENOH_ENCODING); None in memory
 
 
 class Keys:

@@ -49,6 +49,9 @@ import numpy as np
 from agent.net import roster, schemas
 
 SCHEMA_VERSION = 1
+#: The Zenoh encoding every message is published with (``agent.net.zenoh_transport``): the format and its version,
+#: so a subscriber knows what the bytes are before it parses them (Zenoh's default would be ``zenoh/bytes``)
+ZENOH_ENCODING = f"application/msgpack;skymesh-wire={SCHEMA_VERSION}"
 
 #: Message kinds this module knows (those with a schema). Another module extends the set without touching
 #: this one: ``decode(data, kinds=wire.KINDS | {"particles"})`` (a kind without a schema decodes as a
@@ -63,6 +66,7 @@ REASONS: frozenset[str] = frozenset(
         "bad_type",  # a value of the wrong type (incl. disallowed array dtype, unknown ext type)
         "bad_field",  # a field missing or unknown, or an out-of-range value (agent id, negative seq)
         "version",  # schema version other than SCHEMA_VERSION
+        "bad_encoding",  # a Zenoh encoding other than ZENOH_ENCODING: another format, or another version of it
         "unknown_kind",
         "bad_shape",  # array shape wrong for its role, or not matching its byte count
         "non_finite",  # NaN or inf
@@ -202,6 +206,14 @@ def decode(
         raise
     except Exception as exc:  # a safety net: the agent must never crash on input (DESIGN.md §5)
         raise DecodeError("malformed", f"unexpected {type(exc).__name__} while validating") from None
+
+
+def check_encoding(encoding: str | None) -> None:
+    """:class:`DecodeError` ``bad_encoding`` unless the Zenoh encoding a message came with is :data:`ZENOH_ENCODING`
+    (``None``: a transport without encodings, the in-memory bus). Checked before :func:`decode`: bytes of another
+    format, or of another version of this one, are not parsed."""
+    if encoding is not None and encoding != ZENOH_ENCODING:
+        raise DecodeError("bad_encoding", f"Zenoh encoding {encoding[:80]!r}, expected {ZENOH_ENCODING!r}")
 
 
 def encoded_size(envelope: Envelope, key: bytes | None = None) -> int:

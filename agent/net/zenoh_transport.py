@@ -17,6 +17,9 @@ in the socket buffers). A ring keeps the newest ``queue_limit`` samples: when th
 behind, the oldest are overwritten (a slow agent must not grow without bound). Zenoh does not say how many;
 ``dropped`` counts the drains that pulled a full ring's worth from one subscription, where the oldest may
 have been overwritten.
+
+Every sample is published with the encoding :data:`agent.net.wire.ZENOH_ENCODING` (the format and its version) and
+handed over with the encoding it arrived with, which the receiver checks (``wire.check_encoding``).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ import time
 import zenoh
 
 from agent.net.keys import Incoming, Keys
+from agent.net.wire import ZENOH_ENCODING
 
 QUEUE_LIMIT = 10_000  # samples per subscription; chosen here (40 agents at 5 Hz send an agent ~300 per second)
 
@@ -103,6 +107,7 @@ class ZenohTransport:
         self.dropped = 0  # drains that pulled a full ring from one subscription (its oldest may have been lost)
         self._limit = queue_limit
         self._publishers: dict[str, zenoh.Publisher] = {}
+        self._encoding = zenoh.Encoding(ZENOH_ENCODING)  # what the bytes are; receivers check it (wire.decode)
         self._subscribers = [self.session.declare_subscriber(k, zenoh.handlers.RingChannel(queue_limit))
                              for k in subscribe]
         self._alive: set[str] = set()
@@ -125,7 +130,7 @@ class ZenohTransport:
     def publish(self, key: str, data: bytes) -> None:
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._publishers[key] = self.session.declare_publisher(key)
+            pub = self._publishers[key] = self.session.declare_publisher(key, encoding=self._encoding)
         pub.put(data)
 
     def drain(self) -> list[Incoming]:
@@ -135,7 +140,7 @@ class ZenohTransport:
         for sub in self._subscribers:
             start = len(items)
             while (sample := sub.try_recv()) is not None:
-                items.append(Incoming(str(sample.key_expr), sample.payload.to_bytes(), now))
+                items.append(Incoming(str(sample.key_expr), sample.payload.to_bytes(), now, str(sample.encoding)))
             if len(items) - start >= self._limit:
                 self.dropped += 1
         return items

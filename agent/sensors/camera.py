@@ -17,7 +17,10 @@
 2. **video quality** D(t) of the frame (thesis 000 §2.4, :class:`~perception.quality.VideoQuality`); of a
    frame drawn in parts, D(t) is measured on its 320×240 preview, which is the image ``I`` D(t) is defined
    on (the whole frame downsampled to 320×240; the preview is drawn at that size with the noise the
-   downsampling leaves);
+   downsampling leaves). While D(t) is above its threshold the video source has *failed* (thesis 000: a
+   failed link): its frames are still checked (bad frames counted by reason) but give no bearings
+   (``video_failed`` among the outcomes), and the first time of failure is in the metrics
+   (``video_failed_at``, only when it failed);
 3. **detection**: colour blobs by default (Ross et al., :class:`~perception.blobs.ColorBlobDetector`; in
    the windows of a frame drawn in parts) or dark blobs (thesis 000 §2.2; on the preview, its working
    image), optionally through the persistent-object filter; detections are in frame pixels either way;
@@ -129,6 +132,7 @@ class CameraStats:
     detected: int = 0  # of those, how many were detected
     false_detections: int = 0  # detections matching no target (synthetic camera only)
     outcomes: Counter = field(default_factory=Counter)  # reason -> frames or detections lost
+    failed_at: float | None = None  # when D(t) first crossed its threshold: the video source failed [s]
 
 
 class SteeredGimbal:
@@ -223,10 +227,15 @@ class CameraSensor(BearingSource):
         frame, labels = self._capture(t, state, truth)
         self.stats.frames += 1
         self.last_quality = self.quality.update(whole_view(frame))
+        if self.last_quality.failed and self.stats.failed_at is None:
+            self.stats.failed_at = t
         if frame is not None:
             result = self.detector.detect(frame)
             if result.error is not None:
                 self.stats.outcomes[f"frame_{result.error}"] += 1
+            elif self.last_quality.failed:  # a frame of a failed source: no bearings from it
+                self.stats.outcomes["video_failed"] += 1
+                self._label(np.empty((0, 2)), labels)  # its visible targets count as missed
             else:
                 self.stats.frames_ok += 1
                 pixels = self._kept(result.detections)
@@ -261,6 +270,7 @@ class CameraSensor(BearingSource):
             "false_detections": s.false_detections,
             "false_per_frame": s.false_detections / s.frames_ok if s.frames_ok else None,
             "video_quality": self.video_quality, "video_failed": self.quality.failed,
+            **({} if s.failed_at is None else {"video_failed_at": s.failed_at}),
             "outcomes": dict(s.outcomes),
             **({} if self.steering is None else {"gimbal": self.steering.metrics()}),
         }

@@ -26,7 +26,7 @@ DURATION = 15.0
 
 @pytest.fixture(scope="module")
 def camera_run(tmp_path_factory):
-    """4 agents of the camera scenario for 15 s at real time; uav0 watches a video of a red target."""
+    """4 agents of the default scenario (cameras) for 15 s at real time; uav0 watches a video of a red target."""
     video = tmp_path_factory.mktemp("video") / "red.avi"
     pose = CameraPose.from_vehicle([0.0, 0.0, -80.0], 0.0, 0.0, 0.0, Gimbal(0.0, -math.pi / 2))
     frame = render_frame((pose, Intrinsics.from_fov(640, 480, 90.0)), 640, 480,
@@ -35,7 +35,7 @@ def camera_run(tmp_path_factory):
     for _ in range(VIDEO_FRAMES):
         writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
     writer.release()
-    scenario = load("camera", duration=DURATION, agents=4)
+    scenario = load("default", duration=DURATION, agents=4)
     run_dir = new_run_dir(tmp_path_factory.mktemp("runs"), scenario.name)
     outcome = Launcher(scenario, run_dir, speed=1.0, rerun="off", cameras={"uav0": str(video)}).run()
     return outcome, str(video)

@@ -7,7 +7,7 @@ installation).
 loader's overrides, as ``skymesh run --duration S --seed K`` applies them), the commit of the code that
 wrote it, and a :func:`mesh_sim.run_compare.snapshot` of its run folder (``metrics.json`` in full,
 ``agent-*.json``, ``oracle.json`` and ``fire_maps.npz`` as SHA-256 digests). The durations are short (all
-eight runs take well under a minute) but each run does something: tracks form in default and camera, grids
+six runs take well under a minute) but each run does something: tracks form in default (the camera pipeline), grids
 are exchanged and fused in fire, and partition crosses its t = 15 s partition event.
 
 The files were written from the code before the agent package was restructured into net/, sensors/,
@@ -45,7 +45,7 @@ from mesh_sim.run_compare import compare, diff, difference_lines, resolve_run, s
 GOLDEN = Path(__file__).with_name("golden")
 REPO = Path(__file__).resolve().parents[2]
 #: (scenario, simulated seconds) of each golden run, at each of SEEDS.
-DURATIONS = {"default": 10.0, "camera": 10.0, "fire": 8.0, "partition": 18.0}
+DURATIONS = {"default": 10.0, "fire": 8.0, "partition": 18.0}
 SEEDS = (1, 2)
 #: Floats must agree to this relative tolerance, arrays by their sums (``mesh_sim.run_compare.diff``): a fresh
 #: install in November 2026 (numpy 2.4.6, SciPy 1.17.1, OpenCV 5.0.0.93) moved the runs by ~1e-11 relative,

@@ -97,7 +97,7 @@ def test_the_imm_oracle_is_consistent_on_every_shipped_target():
 
     pooled: dict[str, list] = {}
     for seed in (1, 2):
-        scenario = load("camera", seed=seed, duration=90.0, agents=4, tasking=PLACEHOLDER)
+        scenario = load("default", seed=seed, duration=90.0, agents=4, tasking=PLACEHOLDER)
         with tempfile.TemporaryDirectory() as tmp:
             metrics = run_lockstep(scenario, Path(tmp))
         for t in metrics["oracle"]["imm_targets"]:

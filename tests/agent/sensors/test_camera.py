@@ -205,11 +205,11 @@ BAD_FRAMES = [None, np.zeros((0, 0, 3), np.uint8), np.zeros((100, 100, 3), np.ui
 
 
 def test_bad_frames_are_counted_by_reason_and_never_raise():
-    source = ScriptedSource([*BAD_FRAMES, good_frame()])
+    source = ScriptedSource([good_frame(), *BAD_FRAMES])  # good first: after the bad ones the source has failed
     sensor = CameraSensor(CameraSensorConfig(), seed=0, source=source)
     out = [sensor.detect(0.2 * k, state(0.2 * k), []) for k in range(len(BAD_FRAMES) + 2)]
-    assert all(not bearings for bearings in out[:-2])
-    assert len(out[-2]) == 1 and out[-2][0].truth_id is None  # the good frame: a detection, no truth label
+    assert all(not bearings for bearings in out[1:])
+    assert len(out[0]) == 1 and out[0][0].truth_id is None  # the good frame: a detection, no truth label
     assert sensor.outcomes == Counter({"read_failed": 2, "frame_empty": 1, "frame_wrong_shape": 2,
                                        "frame_corrupt": 1, "frame_wrong_dtype": 1})
     assert sensor.metrics()["frames_ok"] == 1
@@ -238,7 +238,7 @@ def test_a_pose_that_never_arrives_times_out():
 
 
 def test_the_agent_counts_bad_frames_in_its_metrics(tmp_path):
-    scenario = load("camera", agents=1, duration=2.0).agent
+    scenario = load("default", agents=1, duration=2.0).agent
     keys = Keys(f"t-{uuid.uuid4().hex[:8]}")
     bus = InMemoryBus()
     agent = Agent("uav0", 0, scenario, bus.endpoint("uav0", keys.agent_subscriptions()), keys, seed=0,
@@ -253,17 +253,20 @@ def test_the_agent_counts_bad_frames_in_its_metrics(tmp_path):
 # ------------------------------------------------------------------------------------ external video
 
 
-@pytest.fixture(scope="module")
-def red_target_video(tmp_path_factory) -> str:
-    """An MJPG .avi of a nadir camera 80 m above a red disc at (3, 2): 12 frames, 640 x 480."""
-    path = tmp_path_factory.mktemp("video") / "red_target.avi"
+def write_video(path, frames) -> str:
+    """``frames`` (RGB, 640 x 480) as an MJPG .avi at 5 frames per second; its path."""
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 5.0, (640, 480))
     assert writer.isOpened()
-    frame = good_frame()
-    for _ in range(12):
+    for frame in frames:
         writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
     writer.release()
     return str(path)
+
+
+@pytest.fixture(scope="module")
+def red_target_video(tmp_path_factory) -> str:
+    """An MJPG .avi of a nadir camera 80 m above a red disc at (3, 2): 12 frames, 640 x 480."""
+    return write_video(tmp_path_factory.mktemp("video") / "red_target.avi", [good_frame()] * 12)
 
 
 def test_a_video_file_replaces_the_synthetic_camera(red_target_video):
@@ -289,14 +292,14 @@ def test_a_source_that_cannot_be_opened_is_a_clear_error(tmp_path):
     rc = skymesh(["run", "--camera", "uav9=x.avi", "--agents", "2", "--out", str(tmp_path), "--rerun", "off"])
     assert rc == 2
     out = subprocess.run([sys.executable, "-m", "agent", "--id", "uav0", "--index", "0", "--fleet", "x",
-                          "--scenario", str(load("camera").path), "--connect", "tcp/127.0.0.1:9",
+                          "--scenario", str(load("default").path), "--connect", "tcp/127.0.0.1:9",
                           "--camera", str(tmp_path / "missing.avi")],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "cannot open camera source" in out.stderr
 
 
 def test_skymesh_run_lockstep_with_a_camera_file(tmp_path, red_target_video, capsys):
-    rc = skymesh(["run", "--lockstep", "--scenario", "camera", "--agents", "2", "--duration", "4", "--rerun", "off",
+    rc = skymesh(["run", "--lockstep", "--scenario", "default", "--agents", "2", "--duration", "4", "--rerun", "off",
                   "--out", str(tmp_path), "--camera", f"uav0={red_target_video}"])
     assert rc == 0
     (run_dir,) = tmp_path.iterdir()
@@ -312,7 +315,7 @@ def test_skymesh_run_lockstep_with_a_camera_file(tmp_path, red_target_video, cap
 
 
 def test_lockstep_run_with_the_camera_tracks_every_target(tmp_path):
-    scenario = load("camera", duration=45.0)
+    scenario = load("default", duration=45.0)
     metrics = run_lockstep(scenario, tmp_path)
     assert metrics["fleet"]["targets_tracked_by_every_agent"], [a["targets"] for a in metrics["agents"]]
     for agent in metrics["agents"]:
@@ -326,7 +329,7 @@ def test_lockstep_run_with_the_camera_tracks_every_target(tmp_path):
 
 
 def test_telemetry_carries_the_video_quality():
-    scenario = load("camera", agents=1, duration=2.0).agent
+    scenario = load("default", agents=1, duration=2.0).agent
     keys = Keys(f"t-{uuid.uuid4().hex[:8]}")
     bus = InMemoryBus()
     agent = Agent("uav0", 0, scenario, bus.endpoint("uav0", keys.agent_subscriptions()), keys, seed=0)
