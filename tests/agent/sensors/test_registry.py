@@ -43,8 +43,8 @@ def test_a_sensor_override_of_another_kind_replaces_the_section():
     camera = load("default", sensor={"width": 320, "height": 240}).agent.sensor  # same kind: merged
     assert isinstance(camera, CameraSensorConfig) and (camera.width, camera.height) == (320, 240)
     assert camera.hfov == pytest.approx(math.radians(90.0))  # the rest of the section is kept
-    assert isinstance(load("camera", sensor={"kind": "bearing"}).agent.sensor, BearingSensorConfig)
-    assert load("camera", sensor={"gps_latency": 0.43}).agent.sensor.width == 640
+    assert isinstance(load("default", sensor={"kind": "bearing"}).agent.sensor, BearingSensorConfig)
+    assert load("default", sensor={"gps_latency": 0.43}).agent.sensor.width == 640
 
 
 class _Source:
