@@ -11,6 +11,9 @@
   ``--vehicle mavlink`` starts a ``skymesh autopilot`` per agent and flies each agent over MAVLink UDP.
   ``--camera uav0=clip.avi`` replaces that agent's synthetic camera with an OpenCV video source (file, device
   index, stream URL); a source that cannot be opened is a usage error before anything starts;
+* ``skymesh testbed [the options of run] [--link-down T:uavK[:T_UP] ...] [--tbf-rate BYTES_PER_S]`` — the run
+  across hosts on this machine: a Linux network namespace and a Zenoh router per agent (``mesh_sim.testbed``;
+  root); a link taken down and up mid-run, the kernel's rate cap on every host; ``testbed.json`` in the run folder;
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
 * ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``);
 * ``skymesh compare BEFORE AFTER [--plain] [--limit N]`` — compare two run folders exactly, volatile fields
@@ -90,7 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--kinds", type=_names, metavar="NAME,NAME,...",
                        help="fuzz: fuzz only these message kinds, e.g. track,grid (default: every kind)")
 
-    for name, text in (("run", "run a team of agents on a scenario"), ("demo", "run the default scenario")):
+    for name, text in (("run", "run a team of agents on a scenario"), ("demo", "run the default scenario"),
+                       ("testbed", "run a team across hosts: one Linux network namespace and Zenoh router per agent")):
         run = commands.add_parser(name, help=text, description=text)
         run.add_argument("--scenario", default="default", help="a shipped scenario name or a TOML file")
         run.add_argument("--agents", type=_positive_int, help="number of agents (overrides the scenario)")
@@ -115,6 +119,11 @@ def build_parser() -> argparse.ArgumentParser:
         run.add_argument("--camera", action="append", default=[], metavar="AGENT=SOURCE",
                          help="replace an agent's synthetic camera with an OpenCV source (file, device index, URL), "
                               "e.g. uav0=clip.avi; repeatable")
+    testbed = commands.choices["testbed"]
+    testbed.add_argument("--link-down", action="append", default=[], metavar="T:uavK[:T_UP]",
+                         help="set host uavK's network link down at simulation time T (and up at T_UP); repeatable")
+    testbed.add_argument("--tbf-rate", type=float, metavar="BYTES_PER_S",
+                         help="cap what every host sends with the kernel's token bucket (tc tbf)")
 
     stress = commands.add_parser("stress", help="bandwidth and topology stress (= skymesh bench stress)",
                                  description="Live runs under topology churn with a shrinking bandwidth cap.")
@@ -205,6 +214,7 @@ def _run(args) -> int:
     from mesh_sim.lockstep import run_lockstep
     from mesh_sim.results import grid_table, summary_table
     from mesh_sim.scenario import load
+    from mesh_sim.testbed import LinkDown, run_testbed
 
     console = make_console()
     overrides = {"agents": args.agents, "duration": args.duration, "seed": args.seed}
@@ -219,6 +229,8 @@ def _run(args) -> int:
         cameras = _cameras(args.camera, scenario.agent.agents)
         with run_folder(args.out, scenario.name) as run_dir:
             if args.lockstep:
+                if args.command == "testbed":
+                    raise ValueError("--lockstep runs every agent in one process: nothing to spread over hosts")
                 if args.rerun not in ("save", "off"):
                     raise ValueError("--lockstep records with --rerun save or off")
                 if args.vehicle != "kinematic":
@@ -227,11 +239,14 @@ def _run(args) -> int:
                     raise ValueError("--restart is for live runs: lockstep agents do not die")
                 metrics, status = run_lockstep(scenario, run_dir, rerun=args.rerun, cameras=cameras), "completed"
             else:
-                outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console,
-                                   cameras=cameras, vehicle=args.vehicle, restart=args.restart).run()
+                options = dict(speed=args.speed, rerun=args.rerun, console=console, cameras=cameras,
+                               vehicle=args.vehicle, restart=args.restart)
+                outcome = (run_testbed(scenario, run_dir, [LinkDown.parse(spec) for spec in args.link_down],
+                                       args.tbf_rate, **options)
+                           if args.command == "testbed" else Launcher(scenario, run_dir, **options).run())
                 metrics, status = outcome.metrics, outcome.status
     except (ValueError, OSError) as err:
-        return usage_error("skymesh run", err)
+        return usage_error(f"skymesh {args.command}", err)
     console.print(summary_table(metrics))
     if (fire_map := grid_table(metrics)) is not None:
         console.print(fire_map)

@@ -210,7 +210,7 @@ class Launcher:
         scenario_file = self.run_dir / "scenario.json"
         write_json(scenario_file, self.scenario.raw)
         (self.run_dir / "logs").mkdir(exist_ok=True)
-        router, endpoint = open_router()
+        router, endpoint = self._open_router()
         status = "completed"
         try:
             with _sigterm_raises():
@@ -229,6 +229,14 @@ class Launcher:
         pids = {c.name if c.incarnation == 0 else f"{c.name}.{c.incarnation}": c.process.pid for c in self.children}
         return RunOutcome(self.run_dir, status, metrics, pids,
                           dict(self.startup_s), list(self.deaths))
+
+    def _open_router(self) -> tuple[zenoh.Session, str]:
+        """The router every child connects to, and its endpoint (a seam: mesh_sim.testbed runs one per host)."""
+        return open_router()
+
+    def _command(self, name: str, role: str, args: list[str]) -> list[str]:
+        """The command line that starts child ``name`` (a seam: mesh_sim.testbed runs it in a namespace)."""
+        return [sys.executable, *args]
 
     @property
     def _epoch_file(self) -> Path:
@@ -306,7 +314,7 @@ class Launcher:
         log_path = self.run_dir / "logs" / (f"{name}.log" if incarnation == 0 else f"{name}.{incarnation}.log")
         started = time.time()
         with open(log_path, "wb") as log:
-            proc = subprocess.Popen([sys.executable, *args], stdout=log, stderr=subprocess.STDOUT,
+            proc = subprocess.Popen(self._command(name, role, args), stdout=log, stderr=subprocess.STDOUT,
                                     stdin=subprocess.DEVNULL, env=self.env)
         self.children.append(Child(name, role, proc, log_path, started, list(args), incarnation))
 

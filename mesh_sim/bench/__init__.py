@@ -60,6 +60,12 @@ BENCHMARKS: dict[str, Benchmark] = {
             options=("sizes", "sensor"),
         ),
         Benchmark(
+            "testbed",
+            "mesh_sim.bench.testbed",
+            "one host vs a Linux network namespace and Zenoh router per agent (root): RMSE ratio, missed steps, bytes "
+            "per agent vs the veths' kernel counters; the emulated radio's rate cap vs tbf (4 agents with --quick, 8)",
+        ),
+        Benchmark(
             "transport",
             "mesh_sim.bench.transport",
             "per-hop round trip and throughput of the agent transport (Zenoh + wire format) vs bare Zenoh pub/sub",
