@@ -199,7 +199,10 @@ def _bench(args) -> int:
               "an option of this benchmark"
               + (f" (only of: {takes})" if takes else ""), file=sys.stderr)
         return EXIT_USAGE
-    result = bench.run(quick=args.quick, repeats=args.repeats, **options)
+    try:
+        result = bench.run(quick=args.quick, repeats=args.repeats, **options)
+    except OSError as err:  # an environment the benchmark cannot run in (skymesh bench testbed: no namespaces)
+        return usage_error(f"skymesh bench {args.name}", err)
     bench.report(result, console)
     if args.json is not None:
         try:

@@ -42,15 +42,19 @@ BURST_S = 2.0  # the radio bucket's depth in seconds of the cap (mesh_sim.bench.
 GOAL = 0.10  # the issue's: within 10 %
 
 
-def run(quick: bool = False, repeats: int | None = None, runs_dir: str | os.PathLike | None = None) -> dict:
-    """Run the benchmark (``repeats`` is accepted for the command line's sake: every run is one live run).
-    Run folders go to a temporary folder removed afterwards, or under ``runs_dir`` (kept)."""
+def run(quick: bool = False, repeats: int | None = None, *, agents: int | None = None, duration: float | None = None,
+        runs_dir: str | os.PathLike | None = None) -> dict:
+    """Run the benchmark (``repeats`` is accepted for the command line's sake: every run is one live run);
+    ``agents`` and ``duration`` override the mode's. Run folders go to a temporary folder removed afterwards, or
+    under ``runs_dir`` (kept)."""
     from mesh_sim import netns
 
     if (why := netns.unavailable()) is not None:
         raise OSError(f"skymesh bench testbed needs network namespaces: {why}")
-    agents = QUICK_AGENTS if quick else FULL_AGENTS
-    duration = QUICK_DURATION_S if quick else FULL_DURATION_S
+    agents = int(agents or (QUICK_AGENTS if quick else FULL_AGENTS))
+    duration = float(duration or (QUICK_DURATION_S if quick else FULL_DURATION_S))
+    if agents < 2 or not duration > 0:
+        raise ValueError(f"bad settings: agents {agents} (at least 2), duration {duration} s (positive)")
     radio_cap = {"rate": LINK_CAP, "burst": BURST_S * LINK_CAP}
     rows = []
     with common.runs_folder(runs_dir, "skymesh-bench-testbed-") as base, \
