@@ -31,7 +31,7 @@ from pathlib import Path
 from agent.net.zenoh_transport import SessionError
 from agent.runtime import write_json
 from mesh_sim import netns
-from mesh_sim.launcher import GRACE_S, Launcher, RunOutcome
+from mesh_sim.launcher import GRACE_S, Launcher, RunOutcome, _sigterm_raises, _Terminated
 
 ROUTER_PORT = 7447  # Zenoh's default, in every namespace: each host has its own port space
 ROUTER_READY_S = 60.0  # wall seconds for a host's router to listen (python and zenoh imports on a loaded machine)
@@ -195,25 +195,28 @@ def bytes_check(agent: dict, sent: dict[str, int], remote_routers: int) -> dict:
 
 def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rate: float | None = None,
                 **launcher) -> RunOutcome:
-    """``skymesh testbed``: the hosts made, the run, ``testbed.json`` written, the hosts removed (also on failure
-    or Ctrl-C). ``ValueError`` for bad settings, ``OSError`` when namespaces cannot be made here."""
+    """``skymesh testbed``: the hosts made, the run, ``testbed.json`` written, the hosts removed (also on failure,
+    Ctrl-C or SIGTERM). ``ValueError`` for bad settings, ``OSError`` when namespaces cannot be made here."""
     if (why := netns.unavailable()) is not None:
         raise OSError(f"no namespace test bed here: {why}")
     names = [f"uav{i}" for i in range(scenario.agent.agents)]
     for event in link_down:
         if event.host not in names:
             raise ValueError(f"--link-down: no host {event.host!r} in this run (hosts are uav0..{names[-1]})")
-    with netns.network([GROUND, *names]) as net:
-        if tbf_rate is not None:
-            for name in net.hosts:
-                net.cap_rate(name, tbf_rate)
-        bed = TestbedLauncher(net, scenario, run_dir, link_down=link_down, **launcher)
-        try:
-            outcome = bed.run()
-        finally:
-            if bed.events is not None:
-                bed.events.stop.set()
-        counters = {name: net.counters(name) for name in net.hosts}
+    try:
+        with _sigterm_raises(), netns.network([GROUND, *names]) as net:  # SIGTERM while setting up: removed too
+            if tbf_rate is not None:
+                for name in net.hosts:
+                    net.cap_rate(name, tbf_rate)
+            bed = TestbedLauncher(net, scenario, run_dir, link_down=link_down, **launcher)
+            try:
+                outcome = bed.run()
+            finally:
+                if bed.events is not None:
+                    bed.events.stop.set()
+            counters = {name: net.counters(name) for name in net.hosts}
+    except _Terminated:  # outside the run itself (which reports its own): there are no results
+        raise OSError("terminated while the test bed was being set up; everything made is removed") from None
     sent = {name: {k: v - bed.at_epoch.get(name, {}).get(k, 0) for k, v in counters[name].items()}
             for name in names}
     remote = len(names) - 1 + (bed.rerun != "off")

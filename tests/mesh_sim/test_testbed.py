@@ -5,8 +5,12 @@ from __future__ import annotations
 
 import json
 import math
+import signal
 import subprocess
+import sys
+import time
 
+import psutil
 import pytest
 import zenoh
 
@@ -102,3 +106,30 @@ def test_three_hosts_run_the_default_scenario_with_a_link_down_and_leave_nothing
     assert report["bytes"]["uav1"]["payload_ratio"] < min(connected.values()), "what uav1 sent while cut off stayed"
     assert made and _ours(made[0]) == 0
     assert_all_gone(outcome.pids.values())
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(netns.unavailable() is not None, reason=str(netns.unavailable()))
+def test_sigterm_mid_run_stops_everything_and_removes_the_namespaces(tmp_path):
+    """``skymesh testbed`` terminated once its agents run: exit 143 (128 + SIGTERM), its namespaces gone, no child
+    left (psutil, by PID)."""
+    proc = subprocess.Popen([sys.executable, "-m", "mesh_sim", "testbed", "--agents", "2", "--duration", "60",
+                             "--rerun", "off", "--out", str(tmp_path)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.time() + 60
+        while not list(tmp_path.glob("*/logs/uav1.ready")):
+            assert proc.poll() is None and time.time() < deadline, "the agents never got ready"
+            time.sleep(0.1)
+        children = [c.pid for c in psutil.Process(proc.pid).children(recursive=True)]
+        spaces = {subprocess.run(["ip", "netns", "identify", str(pid)], capture_output=True, text=True).stdout.strip()
+                  for pid in children}
+        (tag,) = {name.split("-")[1] for name in spaces if name.startswith("skymesh-")}
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=60) == 143
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert _ours(tag) == 0
+    assert_all_gone(children)
