@@ -9,7 +9,9 @@ TCP, as on a fleet of companion computers; the emulated radio (``[radio]``) stil
 top of the network.
 
 Everything else is :class:`mesh_sim.launcher.Launcher`'s, through two seams: where a child runs
-(``ip netns exec``) and which router it connects to (its own host's). The run folder is ``skymesh run``'s,
+(``ip netns exec`` into its host: an agent's own, the ground for the world and the observer) and which router
+the run opens (a router per host, :class:`Routers`; every child connects to ``tcp/127.0.0.1`` of its namespace,
+so to its own host's). The run folder is ``skymesh run``'s,
 plus ``testbed.json``: each host's address and its veth's kernel counters (:meth:`mesh_sim.netns.Network.counters`),
 the link events as they happened, the rate cap, and the bytes comparison of :func:`bytes_check`.
 
@@ -167,28 +169,28 @@ class TestbedLauncher(Launcher):
         return epoch
 
 
-def bytes_check(agent: dict, sent: dict[str, int], remote_routers: int) -> dict:
+def bytes_check(agent: dict, sent: dict[str, int], peers: int, observer: bool) -> dict:
     """What host ``uavK`` sent on its veth during the run (``sent``: the counters' growth from simulation time 0
     to the end) against what its agent says it sent, made comparable.
 
-    A router forwards a message once to each remote router with a subscriber for it, over TCP: a belief or
-    topology report (subscribed by every other agent) crosses the veth ``remote_routers`` times (the other UAV
-    hosts, and the ground when the observer runs); telemetry and simulation data (subscribed by the world only)
-    once. So the fair expectation is ``E = beliefs × remote_routers + telemetry + simulation`` (the agent's own
-    counts: ``bytes_tx_by_kind``, ``sim_bytes_tx_by_kind``), and ``ratio = kernel tx ÷ E``: above 1 by the
+    A router forwards a message once to each remote router with a subscriber for it, over TCP: a belief crosses
+    the veth once per other UAV host (``peers``) and once more for the ground's observer when it runs; a topology
+    report once per other UAV host; telemetry and simulation data (the world subscribes) once. So the fair
+    expectation is ``E = beliefs × (peers + observer) + topology × peers + telemetry + simulation`` (the agent's
+    own counts: ``bytes_tx_by_kind``, ``sim_bytes_tx_by_kind``), and ``ratio = kernel tx ÷ E``: above 1 by the
     framing (Ethernet 14 + IP 20 + TCP 32 bytes per segment, Zenoh's batch and message headers), the TCP
     acknowledgements of what the host receives, and Zenoh's own traffic (keep-alives, declarations,
     liveliness). ``payload_ratio`` takes the frame headers out — every frame on the veth is TCP over IPv4
     (:data:`FRAME_HEADER` bytes with TCP timestamps), and a pure acknowledgement is nothing but headers — so
     that ``payload_ratio - 1`` is Zenoh's own share: ``(kernel tx - FRAME_HEADER × tx packets) ÷ E``."""
     by_kind = agent.get("bytes_tx_by_kind", {})
-    telemetry = by_kind.get("telemetry", 0)
-    fanned = sum(by_kind.values()) - telemetry
+    telemetry, topology = by_kind.get("telemetry", 0), by_kind.get("topology", 0)
+    beliefs = sum(by_kind.values()) - telemetry - topology
     simulation = sum(agent.get("sim_bytes_tx_by_kind", {}).values())
-    expected = fanned * remote_routers + telemetry + simulation
+    expected = beliefs * (peers + observer) + topology * peers + telemetry + simulation
     payload = sent["tx_bytes"] - FRAME_HEADER * sent["tx_packets"]
-    return {"agent_bytes_tx": int(sum(by_kind.values())), "agent_sim_bytes_tx": int(simulation),
-            "remote_routers": remote_routers, "expected_tx": int(expected), "kernel_tx": sent["tx_bytes"],
+    return {"agent_bytes_tx": int(sum(by_kind.values())), "agent_sim_bytes_tx": int(simulation), "peers": peers,
+            "observer": observer, "expected_tx": int(expected), "kernel_tx": sent["tx_bytes"],
             "kernel_tx_packets": sent["tx_packets"], "ratio": sent["tx_bytes"] / expected if expected else None,
             "payload_ratio": payload / expected if expected else None}
 
@@ -219,14 +221,13 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
         raise OSError("terminated while the test bed was being set up; everything made is removed") from None
     sent = {name: {k: v - bed.at_epoch.get(name, {}).get(k, 0) for k, v in counters[name].items()}
             for name in names}
-    remote = len(names) - 1 + (bed.rerun != "off")
     agents = {a["id"]: a for a in outcome.metrics.get("agents", [])}
     write_json(run_dir / TESTBED_FILE, {
         "hosts": {host.name: {"address": host.address, "at_end": counters[host.name],
                               "at_epoch": bed.at_epoch.get(host.name)} for host in net.hosts.values()},
         "tbf_rate": tbf_rate,
         "link_events": bed.events.done if bed.events is not None else [],
-        "bytes": {name: bytes_check(agents[name], sent[name], remote)
+        "bytes": {name: bytes_check(agents[name], sent[name], len(names) - 1, bed.rerun != "off")
                   for name in names if "bytes_tx_by_kind" in agents.get(name, {})},
     })
     return outcome

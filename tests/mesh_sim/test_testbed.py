@@ -61,15 +61,17 @@ def test_router_configs_are_zenoh_configs_in_a_full_mesh():
     assert json.loads(parsed.get_json("transport/link/tx/lease")) == testbed.LEASE_MS
 
 
-def test_bytes_check_counts_beliefs_once_per_remote_router():
-    """E = (beliefs + topology) × remote routers + telemetry + simulation data; the payload ratio takes 66 bytes
-    of headers per frame out."""
+def test_bytes_check_counts_each_message_once_per_remote_router_subscribed():
+    """E = beliefs × (peers + observer) + topology × peers + telemetry + simulation data; the payload ratio takes
+    66 bytes of headers per frame out."""
     agent = {"bytes_tx_by_kind": {"track": 1000, "topology": 200, "telemetry": 300},
              "sim_bytes_tx_by_kind": {"measurement": 100}}
-    check = testbed.bytes_check(agent, {"tx_bytes": 5000, "tx_packets": 10}, remote_routers=3)
+    check = testbed.bytes_check(agent, {"tx_bytes": 5000, "tx_packets": 10}, peers=3, observer=False)
     assert check["expected_tx"] == 1200 * 3 + 300 + 100
     assert check["ratio"] == pytest.approx(5000 / 4000)
     assert check["payload_ratio"] == pytest.approx((5000 - 660) / 4000)
+    assert testbed.bytes_check(agent, {"tx_bytes": 5000, "tx_packets": 10}, peers=3, observer=True)[
+        "expected_tx"] == 1000 * 4 + 200 * 3 + 300 + 100
 
 
 def _ours(tag: str) -> str:
