@@ -201,6 +201,8 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
     Ctrl-C or SIGTERM). ``ValueError`` for bad settings, ``OSError`` when namespaces cannot be made here."""
     if (why := netns.unavailable()) is not None:
         raise OSError(f"no namespace test bed here: {why}")
+    if tbf_rate is not None and not tbf_rate > 0:
+        raise ValueError(f"--tbf-rate must be positive bytes per second, got {tbf_rate:g}")
     names = [f"uav{i}" for i in range(scenario.agent.agents)]
     for event in link_down:
         if event.host not in names:

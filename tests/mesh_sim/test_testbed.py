@@ -33,6 +33,7 @@ def test_link_down_specs():
 @pytest.mark.parametrize("argv, says", [
     (["--link-down", "5:uav1:2"], "--link-down '5:uav1:2': times must satisfy 0 <= T < T_UP"),
     (["--agents", "2", "--link-down", "5:uav7"], "--link-down: no host 'uav7' in this run (hosts are uav0..uav1)"),
+    (["--tbf-rate", "-5"], "--tbf-rate must be positive bytes per second, got -5"),
     (["--lockstep"], "--lockstep runs every agent in one process: nothing to spread over hosts"),
 ])
 def test_bad_testbed_options_are_one_line_and_exit_2(argv, says, tmp_path, capsys):
