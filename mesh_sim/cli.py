@@ -13,7 +13,7 @@
   index, stream URL); a source that cannot be opened is a usage error before anything starts;
 * ``skymesh testbed [the options of run] [--link-down T:uavK[:T_UP] ...] [--tbf-rate BYTES_PER_S]`` — the run
   across hosts on this machine: a Linux network namespace and a Zenoh router per agent (``mesh_sim.testbed``;
-  root); a link taken down and up mid-run, the kernel's rate cap on every host; ``testbed.json`` in the run folder;
+  root); a link taken down and up mid-run, the kernel's rate cap on every UAV host; ``testbed.json`` in the run folder;
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
 * ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``);
 * ``skymesh compare BEFORE AFTER [--plain] [--limit N]`` — compare two run folders exactly, volatile fields
@@ -123,7 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
     testbed.add_argument("--link-down", action="append", default=[], metavar="T:uavK[:T_UP]",
                          help="set host uavK's network link down at simulation time T (and up at T_UP); repeatable")
     testbed.add_argument("--tbf-rate", type=float, metavar="BYTES_PER_S",
-                         help="cap what every host sends with the kernel's token bucket (tc tbf)")
+                         help="cap what every UAV host sends with the kernel's token bucket (tc tbf)")
 
     stress = commands.add_parser("stress", help="bandwidth and topology stress (= skymesh bench stress)",
                                  description="Live runs under topology churn with a shrinking bandwidth cap.")

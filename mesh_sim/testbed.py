@@ -16,7 +16,8 @@ plus ``testbed.json``: each host's address and its veth's kernel counters (:meth
 the link events as they happened, the rate cap, and the bytes comparison of :func:`bytes_check`.
 
 Impairments are the kernel's: ``--link-down T:uavK[:T_UP]`` sets host K's veth down at simulation time T (and
-up at T_UP), ``--tbf-rate BYTES_PER_S`` caps what every host sends with ``tc ... tbf``. (This kernel family may
+up at T_UP), ``--tbf-rate BYTES_PER_S`` caps what every UAV host sends with ``tc ... tbf`` (not the ground: the
+world's truth and the observer are the simulation's, not radio traffic). (This kernel family may
 lack ``netem``; delay and loss stay the emulated radio's.)
 """
 
@@ -190,6 +191,7 @@ def bytes_check(agent: dict, sent: dict[str, int], peers: int, observer: bool) -
     expected = beliefs * (peers + observer) + topology * peers + telemetry + simulation
     payload = sent["tx_bytes"] - FRAME_HEADER * sent["tx_packets"]
     return {"agent_bytes_tx": int(sum(by_kind.values())), "agent_sim_bytes_tx": int(simulation), "peers": peers,
+            "unfanned_tx": int(telemetry + simulation),  # what only the ground's router receives
             "observer": observer, "expected_tx": int(expected), "kernel_tx": sent["tx_bytes"],
             "kernel_tx_packets": sent["tx_packets"], "ratio": sent["tx_bytes"] / expected if expected else None,
             "payload_ratio": payload / expected if expected else None}
@@ -209,8 +211,8 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
             raise ValueError(f"--link-down: no host {event.host!r} in this run (hosts are uav0..{names[-1]})")
     try:
         with _sigterm_raises(), netns.network([GROUND, *names]) as net:  # SIGTERM while setting up: removed too
-            if tbf_rate is not None:
-                for name in net.hosts:
+            if tbf_rate is not None:  # the UAVs' radios: the ground's traffic is the simulation's, not radio
+                for name in names:
                     net.cap_rate(name, tbf_rate)
             bed = TestbedLauncher(net, scenario, run_dir, link_down=link_down, **launcher)
             try:

@@ -13,23 +13,25 @@ from mesh_sim.bench import testbed as bench
 from tests.processes import assert_no_children_left
 
 
-def _row(run: str, rmse_ratio: float, bytes_s: float, missed: float = 0.0) -> dict:
+def _row(run: str, rmse_ratio: float, bytes_s: float, received: float, missed: float = 0.0) -> dict:
     return {"run": run, "status": "completed", "rmse": 1.0, "anees": 0.6, "rmse_ratio_to_oracle": rmse_ratio,
-            "bytes_per_agent_per_s": bytes_s, "missed_steps": missed, "tbf_rate": None,
-            "kernel_tx_per_host_per_s": None, "kernel_ratio": None, "payload_ratio": None}
+            "bytes_per_agent_per_s": bytes_s, "received_per_agent_per_s": received, "missed_steps": missed,
+            "tbf_rate": None, "kernel_tx_per_host_per_s": None, "kernel_ratio": None, "payload_ratio": None,
+            "unfanned_per_s": None}
 
 
 def test_ratios_are_against_the_single_host_run_and_tbf_against_the_radio_cap(printed):
-    rows = [_row("single host", 1.10, 3000), _row("testbed", 1.15, 3100, missed=0.01), _row("radio cap", 1.4, 1500),
-            _row("tbf cap", 1.68, 1200)]
+    rows = [_row("single host", 1.10, 3000, 9000), _row("testbed", 1.15, 3100, 9300, missed=0.01),
+            _row("radio cap", 1.4, 1500, 4000), _row("tbf cap", 1.68, 3000, 3800)]
     bench._add_ratios(rows)
     by = {r["run"]: r for r in rows}
     assert by["testbed"]["rmse_ratio_vs"] == pytest.approx(1.15 / 1.10)
     assert by["testbed"]["bytes_ratio_vs"] == pytest.approx(3100 / 3000)
-    assert by["tbf cap"]["against"] == "radio cap" and by["tbf cap"]["bytes_ratio_vs"] == pytest.approx(0.8)
+    assert by["tbf cap"]["against"] == "radio cap" and by["tbf cap"]["received_ratio_vs"] == pytest.approx(0.95)
+    assert by["tbf cap"]["bytes_ratio_vs"] == pytest.approx(2.0)
     goals = bench._goals(rows)
     assert goals == {"testbed_rmse_ratio_within_10pct": True, "testbed_no_missed_steps": False,
-                     "tbf_vs_radio_bytes_within_10pct": False, "tbf_vs_radio_rmse_within_10pct": False}
+                     "tbf_vs_radio_received_bytes_within_10pct": True, "tbf_vs_radio_rmse_within_10pct": False}
     text = printed(bench, {"settings": {"agents": 4, "duration_s": 15.0, "seed": 1, "link_cap": 1500.0},
                            "rows": rows, "goals": goals})
     assert "single host" in text and "tbf cap" in text and "1.05x single host" in text
@@ -55,5 +57,6 @@ def test_smallest_live_run(private_tmp):
     assert all(r["status"] == "completed" and r["rmse"] is not None for r in rows.values()), rows
     bed = rows["testbed"]
     assert bed["kernel_tx_per_host_per_s"] > 0 and 1.0 < bed["payload_ratio"] < bed["kernel_ratio"]
-    assert rows["tbf cap"]["tbf_rate"] == pytest.approx(bench.LINK_CAP * 1 * bed["kernel_ratio"])
+    one_peer = bench.LINK_CAP * 1 + bed["unfanned_per_s"]
+    assert rows["tbf cap"]["tbf_rate"] == pytest.approx(one_peer * bed["kernel_ratio"])
     assert rows["single host"]["rmse_ratio_vs"] == 1.0
