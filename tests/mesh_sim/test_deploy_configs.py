@@ -32,13 +32,13 @@ def test_zenoh_reads_every_shipped_config(path):
 
 @pytest.mark.parametrize("name", ["uav-router.json5", "ground-router.json5"])
 def test_the_shipped_routers_are_the_testbeds_but_for_the_addresses(name):
-    """Mode, scouting, gossip, lease and keep-alive as ``skymesh testbed`` runs them; listening on loopback (the
-    host's own clients) and on the network."""
+    """Mode, scouting, gossip, lease, keep-alive and no shared memory as ``skymesh testbed`` runs them; listening
+    on loopback (the host's own clients) and on the network."""
     shipped = zenoh.Config.from_file(str(DEPLOY / name))
     host = netns.Host("uav1", "ns", "veth", "port", "10.213.0.3")
     bed = zenoh.Config.from_json5(json.dumps(testbed.router_config(host, [])))
     for key in ("mode", "scouting/multicast/enabled", "scouting/gossip/enabled", "transport/link/tx/lease",
-                "transport/link/tx/keep_alive"):
+                "transport/link/tx/keep_alive", "transport/shared_memory/enabled"):
         assert _get(shipped, key) == _get(bed, key), key
     assert _get(shipped, "listen/endpoints") == ["tcp/127.0.0.1:7447", "tcp/0.0.0.0:7447"]
 
