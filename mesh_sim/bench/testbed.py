@@ -22,7 +22,9 @@ second by the agents' own accounting and its ratio to the single-host run's, and
 tx bytes per host per second with the comparison of :func:`mesh_sim.testbed.bytes_check`. The two capped runs are
 compared with each other on what got through — bytes *received* per agent per second (a radio-capped agent's
 sender budget thins what it sends, a tbf-capped one's does not know the cap: Zenoh drops what the queue cannot
-take) — and the RMSE ratio, tbf ÷ radio (the issue's goal: within 10 %).
+take) — and fleet RMSE, tbf ÷ radio (the issue's goal: within 10 %). Fleet RMSE, not its ratio to the oracle's: the
+oracle's inputs (the agents' measurements, sent to the world on the ground host) share the capped veth with the
+radio traffic under tbf, and not under the emulated radio.
 """
 
 from __future__ import annotations
@@ -137,6 +139,7 @@ def _add_ratios(rows: list[dict]) -> None:
     for row in rows:
         against = radio if row["run"] == "tbf cap" else base
         row["against"] = against["run"]
+        row["rmse_vs"] = ratio(row["rmse"], against["rmse"])
         row["rmse_ratio_vs"] = ratio(row["rmse_ratio_to_oracle"], against["rmse_ratio_to_oracle"])
         row["bytes_ratio_vs"] = ratio(row["bytes_per_agent_per_s"], against["bytes_per_agent_per_s"])
         row["received_ratio_vs"] = ratio(row["received_per_agent_per_s"], against["received_per_agent_per_s"])
@@ -152,7 +155,7 @@ def _goals(rows: list[dict]) -> dict:
         "testbed_rmse_ratio_within_10pct": _within(by["testbed"]["rmse_ratio_vs"]),
         "testbed_no_missed_steps": by["testbed"]["missed_steps"] == 0,
         "tbf_vs_radio_received_bytes_within_10pct": _within(by["tbf cap"]["received_ratio_vs"]),
-        "tbf_vs_radio_rmse_within_10pct": _within(by["tbf cap"]["rmse_ratio_vs"]),
+        "tbf_vs_radio_fleet_rmse_within_10pct": _within(by["tbf cap"]["rmse_vs"]),
     }
 
 
@@ -162,17 +165,18 @@ def report(result: dict, console=None) -> None:
     common.print_table(
         console, f"One host vs one namespace and router per agent — {s['agents']} agents, {s['duration_s']:g} s, "
                  f"seed {s['seed']}, bearing sensor",
-        ["run", "status", "RMSE [m]", "÷ oracle", "vs", "ANEES", "missed steps", "sent B/s", "vs", "received B/s",
-         "vs", "kernel tx B/s/host", "kernel ÷ expected", "payload ÷ expected"],
-        [(r["run"], r["status"], fmt(r["rmse"], ".2f"), fmt(r["rmse_ratio_to_oracle"], ".2f"),
-          f"{fmt_ratio(r['rmse_ratio_vs'])} {r['against']}", fmt(r["anees"], ".2f"), fmt(r["missed_steps"], ".1%"),
+        ["run", "status", "RMSE [m]", "vs", "÷ oracle", "vs", "ANEES", "missed steps", "sent B/s", "vs",
+         "received B/s", "vs", "kernel tx B/s/host", "kernel ÷ E", "payload ÷ E"],
+        [(r["run"], r["status"], fmt(r["rmse"], ".2f"), fmt_ratio(r["rmse_vs"]), fmt(r["rmse_ratio_to_oracle"], ".2f"),
+          fmt_ratio(r["rmse_ratio_vs"]), fmt(r["anees"], ".2f"), fmt(r["missed_steps"], ".1%"),
           fmt(r["bytes_per_agent_per_s"], ",.0f"), fmt_ratio(r["bytes_ratio_vs"]),
           fmt(r["received_per_agent_per_s"], ",.0f"), fmt_ratio(r["received_ratio_vs"]),
           fmt(r["kernel_tx_per_host_per_s"], ",.0f"), fmt(r["kernel_ratio"], ".2f"), fmt(r["payload_ratio"], ".2f"))
          for r in result["rows"]],
-        caption=f"caps: radio {s['link_cap']:g} B/s per link; tbf per UAV host = (that × (N − 1) + what only the "
-                "ground receives) × the testbed's kernel ÷ expected. \"vs\": the ratio to the run named (single "
-                "host, or the radio cap for tbf). Sent/received: the agents' own accounting, per agent. Expected "
-                "bytes: mesh_sim.testbed.bytes_check.")
+        caption=f"\"vs\": the ratio to the single-host run (the tbf cap's: to the radio cap's). Caps: radio "
+                f"{s['link_cap']:g} B/s per link; tbf per UAV host = (that × (N − 1) + what only the ground receives) "
+                "× the testbed's kernel ÷ E. Sent/received: the agents' own accounting, per agent. E: the expected "
+                "bytes of mesh_sim.testbed.bytes_check. Where the cap also starves the oracle's inputs (tbf), compare "
+                "fleet RMSE, not ÷ oracle.")
     common.print_table(console, "Goals (issue 17)", ["goal", "met"],
                        [(name, common.verdict(ok)) for name, ok in result["goals"].items()])
