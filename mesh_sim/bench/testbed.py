@@ -3,7 +3,7 @@ by the radio against the kernel's.
 
 Four live runs of the default scenario with the geometric bearing sensor (the network is under test, not
 perception; the camera's rendering does not fit 8 agents and 9 routers on a shared 2-core machine), one seed,
-Rerun off, ``--quick``: 4 agents for 15 s, full: 8 agents for 40 s:
+Rerun off, ``--quick``: 4 agents for 10 s, full: 8 agents for 40 s:
 
 * **single host** — ``skymesh run``: one Zenoh router on loopback, every process its client. The baseline.
 * **testbed** — ``skymesh testbed`` (:mod:`mesh_sim.testbed`): a namespace, a veth and a router per agent.
@@ -41,7 +41,7 @@ from mesh_sim.bench.common import fmt, fmt_ratio, ratio
 NAME = "testbed"
 SEED = 1
 QUICK_AGENTS, FULL_AGENTS = 4, 8
-QUICK_DURATION_S, FULL_DURATION_S = 15.0, 40.0  # chosen here: quick stays near a minute of wall time per pair
+QUICK_DURATION_S, FULL_DURATION_S = 10.0, 40.0  # chosen here: quick is start-up (~15-30 s a run) plus 10 s
 SENSOR = {"kind": "bearing"}
 LINK_CAP = 1500.0  # bytes/s per directed link: below what an agent sends (~2-3 kB/s with bearings); chosen here
 BURST_S = 2.0  # the radio bucket's depth in seconds of the cap (mesh_sim.bench.stress's reason)
