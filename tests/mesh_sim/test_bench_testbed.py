@@ -61,3 +61,11 @@ def test_smallest_live_run(private_tmp):
     one_peer = bench.LINK_CAP * 1 + bed["unfanned_per_s"]
     assert rows["tbf cap"]["tbf_rate"] == pytest.approx(one_peer * bed["kernel_ratio"])
     assert rows["single host"]["rmse_ratio_vs"] == 1.0
+    assert all(0 < r["belief_latency_s"] < 5 for r in rows.values()), rows
+
+
+def test_belief_latency_is_weighted_by_the_beliefs_received():
+    team = [{"belief_latency_s": {"mean": 0.2, "count": 3}}, {"belief_latency_s": {"mean": 0.6, "count": 1}},
+            {"belief_latency_s": {"mean": None, "count": 0}}]
+    assert bench._latency(team) == pytest.approx(0.3)
+    assert bench._latency([{}]) is None
