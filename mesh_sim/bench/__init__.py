@@ -63,7 +63,8 @@ BENCHMARKS: dict[str, Benchmark] = {
             "testbed",
             "mesh_sim.bench.testbed",
             "one host vs a Linux network namespace and Zenoh router per agent (root): RMSE ratio, missed steps, bytes "
-            "per agent vs the veths' kernel counters; the emulated radio's rate cap vs tbf (4 agents with --quick, 8)",
+            "per agent vs the veths' kernel counters; full (8 agents): also the emulated radio's rate cap vs tbf "
+            "(--quick: 4 agents, no caps)",
         ),
         Benchmark(
             "transport",

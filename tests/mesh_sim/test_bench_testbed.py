@@ -36,6 +36,8 @@ def test_ratios_are_against_the_single_host_run_and_tbf_against_the_radio_cap(pr
     text = printed(bench, {"settings": {"agents": 4, "duration_s": 15.0, "seed": 1, "link_cap": 1500.0},
                            "rows": rows, "goals": goals})
     assert "single host" in text and "tbf cap" in text and "1.05x" in text
+    quick = rows[:2]  # --quick: no caps, their goals not measured
+    assert bench._goals(quick)["tbf_vs_radio_fleet_rmse_within_10pct"] is None
 
 
 def test_without_namespaces_the_benchmark_says_why(monkeypatch, capsys):
@@ -49,7 +51,7 @@ def test_without_namespaces_the_benchmark_says_why(monkeypatch, capsys):
 @pytest.mark.skipif(netns.unavailable() is not None, reason=str(netns.unavailable()))
 def test_smallest_live_run(private_tmp):
     before = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
-    result = bench.run(quick=True, agents=2, duration=8.0)
+    result = bench.run(agents=2, duration=8.0)  # full: the caps too
     assert_no_children_left()
     assert list(private_tmp.iterdir()) == []
     assert subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout == before
