@@ -3,7 +3,7 @@ by the radio against the kernel's.
 
 Live runs of the default scenario with the geometric bearing sensor (the network is under test, not
 perception; the camera's rendering does not fit 8 agents and 9 routers on a shared 2-core machine), one seed,
-Rerun off; ``--quick``: the first two for 10 s with 4 agents (each live run is ~20 s of start-up on a loaded
+Rerun off; ``--quick``: the first two for 8 s with 4 agents (each live run is ~20 s of start-up on a loaded
 machine), full: all four for 40 s with 8 agents:
 
 * **single host** — ``skymesh run``: one Zenoh router on loopback, every process its client. The baseline.
@@ -43,7 +43,7 @@ from mesh_sim.bench.common import fmt, fmt_ratio, ratio
 NAME = "testbed"
 SEED = 1
 QUICK_AGENTS, FULL_AGENTS = 4, 8
-QUICK_DURATION_S, FULL_DURATION_S = 10.0, 40.0  # chosen here: quick is start-up (~15-30 s a run) plus 10 s
+QUICK_DURATION_S, FULL_DURATION_S = 8.0, 40.0  # chosen here: --quick is two start-ups (~20 s each) and 2 x 8 s
 SENSOR = {"kind": "bearing"}
 LINK_CAP = 1500.0  # bytes/s per directed link: below what an agent sends (~2-3 kB/s with bearings); chosen here
 BURST_S = 2.0  # the radio bucket's depth in seconds of the cap (mesh_sim.bench.stress's reason)
