@@ -15,6 +15,9 @@
   opens its router from a Zenoh JSON5 file (``mesh_sim.run_router``). A completed run whose agents missed more than
   1 % of their deadlines or whose video source failed ends "completed with warnings" (``mesh_sim.run_health``);
   a bad ``--duration``, ``--loss``, ... names the flag (``mesh_sim.run_overrides``);
+* ``skymesh testbed [the options of run] [--link-down T:uavK[:T_UP] ...] [--tbf-rate BYTES_PER_S]`` — the run
+  across hosts on this machine: a Linux network namespace and a Zenoh router per agent (``mesh_sim.testbed``;
+  root); a link taken down and up mid-run, the kernel's rate cap on every UAV host; ``testbed.json`` in the run folder;
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
 * ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``), with this
   environment's Rerun viewer (``mesh_sim.viewer``) unless ``--save`` or ``--connect-viewer`` is given;
@@ -95,7 +98,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--kinds", type=_names, metavar="NAME,NAME,...",
                        help="fuzz: fuzz only these message kinds, e.g. track,grid (default: every kind)")
 
-    for name, text in (("run", "run a team of agents on a scenario"), ("demo", "run the default scenario")):
+    for name, text in (("run", "run a team of agents on a scenario"), ("demo", "run the default scenario"),
+                       ("testbed", "run a team across hosts: one Linux network namespace and Zenoh router per agent")):
         run = commands.add_parser(name, help=text, description=text)
         run.add_argument("--scenario", default="default", help="a shipped scenario name or a TOML file")
         run.add_argument("--agents", type=_positive_int, help="number of agents (overrides the scenario)")
@@ -123,6 +127,11 @@ def build_parser() -> argparse.ArgumentParser:
         run.add_argument("--camera", action="append", default=[], metavar="AGENT=SOURCE",
                          help="replace an agent's synthetic camera with an OpenCV source (file, device index, URL), "
                               "e.g. uav0=clip.avi; repeatable")
+    testbed = commands.choices["testbed"]
+    testbed.add_argument("--link-down", action="append", default=[], metavar="T:uavK[:T_UP]",
+                         help="set host uavK's network link down at simulation time T (and up at T_UP); repeatable")
+    testbed.add_argument("--tbf-rate", type=float, metavar="BYTES_PER_S",
+                         help="cap what every UAV host sends with the kernel's token bucket (tc tbf)")
 
     stress = commands.add_parser("stress", help="bandwidth and topology stress (= skymesh bench stress)",
                                  description="Live runs under topology churn with a shrinking bandwidth cap.")
@@ -200,7 +209,8 @@ def _bench(args) -> int:
         return EXIT_USAGE
     try:
         result = bench.run(quick=args.quick, repeats=args.repeats, **options)
-    except ValueError as err:  # an option's value the benchmark refuses (e.g. --kinds naming no message kind)
+    except (ValueError, OSError) as err:  # a value the benchmark refuses (--kinds nope), an environment it cannot
+        # run in (skymesh bench testbed without namespaces)
         return usage_error(f"skymesh bench {args.name}", err)
     bench.report(result, console)
     if args.json is not None:
@@ -218,6 +228,7 @@ def _run(args) -> int:
     from mesh_sim.run_health import WITH_WARNINGS, judge
     from mesh_sim.run_overrides import given, load_with_flags
     from mesh_sim.sim_progress import sim_progress
+    from mesh_sim.testbed import LinkDown, run_testbed
 
     console = make_console()
     try:
@@ -225,6 +236,8 @@ def _run(args) -> int:
         cameras = _cameras(args.camera, scenario.agent.agents)
         with run_folder(args.out, scenario.name) as run_dir:
             if args.lockstep:
+                if args.command == "testbed":
+                    raise ValueError("--lockstep runs every agent in one process: nothing to spread over hosts")
                 if args.rerun not in ("save", "off"):
                     raise ValueError("--lockstep records with --rerun save or off")
                 if args.vehicle != "kinematic":
@@ -237,13 +250,19 @@ def _run(args) -> int:
                                   "(lockstep)", scenario.agent.duration) as advance:
                     metrics = run_lockstep(scenario, run_dir, rerun=args.rerun, cameras=cameras, advance=advance)
             else:
-                outcome = Launcher(scenario, run_dir, speed=args.speed, rerun=args.rerun, console=console,
-                                   cameras=cameras, vehicle=args.vehicle, restart=args.restart,
-                                   zenoh_config=args.zenoh_config).run()
+                options = dict(speed=args.speed, rerun=args.rerun, console=console, cameras=cameras,
+                               vehicle=args.vehicle, restart=args.restart)
+                if args.command == "testbed":
+                    if args.zenoh_config:
+                        raise ValueError("--zenoh-config is for skymesh run: the test bed opens a router per host")
+                    outcome = run_testbed(scenario, run_dir, [LinkDown.parse(spec) for spec in args.link_down],
+                                          args.tbf_rate, **options)
+                else:
+                    outcome = Launcher(scenario, run_dir, zenoh_config=args.zenoh_config, **options).run()
                 metrics = outcome.metrics
             metrics = judge(run_dir, metrics)  # deadlines missed, a failed sensor: "completed with warnings"
     except (ValueError, OSError) as err:
-        return usage_error("skymesh run", err)
+        return usage_error(f"skymesh {args.command}", err)
     console.print(summary_table(metrics))
     if (fire_map := grid_table(metrics)) is not None:
         console.print(fire_map)

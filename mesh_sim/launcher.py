@@ -219,7 +219,7 @@ class Launcher:
         scenario_file = self.run_dir / "scenario.json"
         write_json(scenario_file, self.scenario.raw)
         (self.run_dir / "logs").mkdir(exist_ok=True)
-        router, endpoint = open_router() if self.zenoh_config is None else router_from_file(self.zenoh_config)
+        router, endpoint = self._open_router()
         self.console.print(f"fleet {self.fleet} at {endpoint}; attach a ground station with: "
                            f"skymesh view --fleet {self.fleet} --connect {endpoint}", highlight=False, soft_wrap=True)
         status = "completed"
@@ -240,6 +240,15 @@ class Launcher:
         pids = {c.name if c.incarnation == 0 else f"{c.name}.{c.incarnation}": c.process.pid for c in self.children}
         return RunOutcome(self.run_dir, status, metrics, pids,
                           dict(self.startup_s), list(self.deaths))
+
+    def _open_router(self) -> tuple[zenoh.Session, str]:
+        """The router every child connects to, and its endpoint: on a free loopback port, or from ``--zenoh-config``
+        (a seam: mesh_sim.testbed runs one per host)."""
+        return open_router() if self.zenoh_config is None else router_from_file(self.zenoh_config)
+
+    def _command(self, name: str, role: str, args: list[str]) -> list[str]:
+        """The command line that starts child ``name`` (a seam: mesh_sim.testbed runs it in a namespace)."""
+        return [sys.executable, *args]
 
     @property
     def _epoch_file(self) -> Path:
@@ -317,7 +326,7 @@ class Launcher:
         log_path = self.run_dir / "logs" / (f"{name}.log" if incarnation == 0 else f"{name}.{incarnation}.log")
         started = time.time()
         with open(log_path, "wb") as log:
-            proc = subprocess.Popen([sys.executable, *args], stdout=log, stderr=subprocess.STDOUT,
+            proc = subprocess.Popen(self._command(name, role, args), stdout=log, stderr=subprocess.STDOUT,
                                     stdin=subprocess.DEVNULL, env=self.env)
         self.children.append(Child(name, role, proc, log_path, started, list(args), incarnation))
 

@@ -60,6 +60,13 @@ BENCHMARKS: dict[str, Benchmark] = {
             options=("sizes", "sensor"),
         ),
         Benchmark(
+            "testbed",
+            "mesh_sim.bench.testbed",
+            "one host vs a Linux network namespace and Zenoh router per agent (root): RMSE ratio, missed steps, bytes "
+            "per agent vs the veths' kernel counters; full (8 agents): also the emulated radio's rate cap vs tbf "
+            "(--quick: 4 agents, no caps)",
+        ),
+        Benchmark(
             "transport",
             "mesh_sim.bench.transport",
             "per-hop round trip and throughput of the agent transport (Zenoh + wire format) vs bare Zenoh pub/sub",

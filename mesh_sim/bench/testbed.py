@@ -1,0 +1,195 @@
+"""``skymesh bench testbed``: the same team on one host and across network namespaces, and a rate cap emulated
+by the radio against the kernel's.
+
+Live runs of the default scenario with the geometric bearing sensor (the network is under test, not
+perception; the camera's rendering does not fit 8 agents and 9 routers on a shared 2-core machine), one seed,
+Rerun off; ``--quick``: the first two for 8 s with 4 agents (each live run is ~20 s of start-up on a loaded
+machine), full: all four for 40 s with 8 agents:
+
+* **single host** — ``skymesh run``: one Zenoh router on loopback, every process its client. The baseline.
+* **testbed** — ``skymesh testbed`` (:mod:`mesh_sim.testbed`): a namespace, a veth and a router per agent.
+* **radio cap** — single host, the emulated radio's ``rate`` = :data:`LINK_CAP` bytes/s per directed link
+  (bucket depth :data:`BURST_S` s of it, as ``skymesh bench stress`` does, so that it binds within a run).
+* **tbf cap** — the testbed with the same cap in the kernel: a ``tbf`` qdisc on every UAV host's veth at
+  ``(LINK_CAP × (N − 1) + u) × k``: the N − 1 links a host's router sends a belief on, plus ``u``, the bytes per
+  second only the ground receives (telemetry, the simulation's data: not capped by the emulated radio), ``k`` the
+  kernel bytes per byte of agent accounting (``ratio`` of :func:`mesh_sim.testbed.bytes_check`: framing,
+  acknowledgements, Zenoh's own traffic); ``u`` and ``k`` measured by the uncapped testbed run of the same
+  invocation.
+
+Per run: fleet RMSE and its ratio to the oracle's, the ratio of that to the single-host run's (the issue's goal:
+within 10 %), fleet ANEES, belief latency (the mean over received beliefs, ``belief_latency_s`` of the agents'
+metrics), missed steps (steps late or skipped, over steps run: machine load), bytes per agent per
+second by the agents' own accounting and its ratio to the single-host run's, and for testbed runs the kernel's
+tx bytes per host per second with the comparison of :func:`mesh_sim.testbed.bytes_check`. The two capped runs are
+compared with each other on what got through — bytes *received* per agent per second (a radio-capped agent's
+sender budget thins what it sends, a tbf-capped one's does not know the cap: Zenoh drops what the queue cannot
+take) — and fleet RMSE, tbf ÷ radio (the issue's goal: within 10 %). Fleet RMSE, not its ratio to the oracle's: the
+oracle's inputs (the agents' measurements, sent to the world on the ground host) share the capped veth with the
+radio traffic under tbf, and not under the emulated radio.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from rich.console import Console
+
+from mesh_sim.bench import common
+from mesh_sim.bench.common import fmt, fmt_ratio, ratio
+
+NAME = "testbed"
+SEED = 1
+QUICK_AGENTS, FULL_AGENTS = 4, 8
+QUICK_DURATION_S, FULL_DURATION_S = 8.0, 40.0  # chosen here: --quick is two start-ups (~20 s each) and 2 x 8 s
+SENSOR = {"kind": "bearing"}
+LINK_CAP = 1500.0  # bytes/s per directed link: below what an agent sends (~2-3 kB/s with bearings); chosen here
+BURST_S = 2.0  # the radio bucket's depth in seconds of the cap (mesh_sim.bench.stress's reason)
+GOAL = 0.10  # the issue's: within 10 %
+
+
+def run(quick: bool = False, repeats: int | None = None, *, agents: int | None = None, duration: float | None = None,
+        runs_dir: str | os.PathLike | None = None) -> dict:
+    """Run the benchmark (``repeats`` is accepted for the command line's sake: every run is one live run);
+    ``agents`` and ``duration`` override the mode's. Run folders go to a temporary folder removed afterwards, or
+    under ``runs_dir`` (kept)."""
+    from mesh_sim import netns
+
+    if (why := netns.unavailable()) is not None:
+        raise OSError(f"skymesh bench testbed needs network namespaces: {why}")
+    agents = int(agents or (QUICK_AGENTS if quick else FULL_AGENTS))
+    duration = float(duration or (QUICK_DURATION_S if quick else FULL_DURATION_S))
+    if agents < 2 or not duration > 0:
+        raise ValueError(f"bad settings: agents {agents} (at least 2), duration {duration} s (positive)")
+    radio_cap = {"rate": LINK_CAP, "burst": BURST_S * LINK_CAP}
+    rows = []
+    with common.runs_folder(runs_dir, "skymesh-bench-testbed-") as base, \
+            common.run_progress(NAME, 2 if quick else 4) as (console, advance):
+        quiet = console if console.is_terminal else Console(stderr=True, quiet=True)
+
+        def measure(label: str, hosts: bool, radio: dict | None = None, tbf: float | None = None) -> dict:
+            advance(f"{label} ({agents} agents, {duration:g} s)", 0)
+            row = _one_run(label, base, quiet, agents, duration, hosts, radio, tbf)
+            advance(f"{label} done", 1)
+            rows.append(row)
+            return row
+
+        measure("single host", hosts=False)
+        bed = measure("testbed", hosts=True)
+        if not quick:
+            measure("radio cap", hosts=False, radio=radio_cap)
+            overhead, ground_only = bed["kernel_ratio"] or 1.0, bed["unfanned_per_s"] or 0.0
+            measure("tbf cap", hosts=True, tbf=(LINK_CAP * (agents - 1) + ground_only) * overhead)
+    _add_ratios(rows)
+    return {
+        "benchmark": NAME,
+        "settings": {"quick": quick, "agents": agents, "duration_s": duration, "seed": SEED, "sensor": SENSOR,
+                     "link_cap": LINK_CAP, "burst_s": BURST_S, "load_average_after": list(os.getloadavg())},
+        "environment": common.environment(("numpy", "scipy", "eclipse-zenoh")),
+        "rows": rows,
+        "goals": _goals(rows),
+    }
+
+
+def _one_run(label: str, base: Path, console: Console, agents: int, duration: float, hosts: bool,
+             radio: dict | None, tbf: float | None) -> dict:
+    from mesh_sim.launcher import Launcher, new_run_dir
+    from mesh_sim.scenario import load
+    from mesh_sim.testbed import TESTBED_FILE, run_testbed
+
+    overrides = {"agents": agents, "duration": duration, "seed": SEED, "sensor": dict(SENSOR)}
+    if radio is not None:
+        overrides["radio"] = radio
+    scenario = load("default", **overrides)
+    run_dir = new_run_dir(base, f"{NAME}-{label.replace(' ', '-')}")
+    options = {"rerun": "off", "console": console}
+    outcome = (run_testbed(scenario, run_dir, tbf_rate=tbf, **options) if hosts
+               else Launcher(scenario, run_dir, **options).run())
+    if outcome.status == "interrupted":
+        raise KeyboardInterrupt
+    metrics = outcome.metrics
+    fleet = metrics.get("fleet", {})
+    team = [a for a in metrics.get("agents", []) if "steps" in a]
+    missed = sum(a.get("deadline_misses", 0) + a.get("skipped_steps", 0) for a in team)
+    steps = sum(a["steps"] + a.get("skipped_steps", 0) for a in team)
+    row = {"run": label, "status": outcome.status, "rmse": fleet.get("rmse"), "anees": fleet.get("anees"),
+           "rmse_ratio_to_oracle": fleet.get("rmse_ratio_to_oracle"),
+           "bytes_per_agent_per_s": fleet.get("bytes_per_agent_per_s"),
+           "received_per_agent_per_s": _mean(a.get("bytes_rx") for a in team) / duration if team else None,
+           "belief_latency_s": _latency(team),
+           "missed_steps": missed / steps if steps else None, "tbf_rate": tbf,
+           "kernel_tx_per_host_per_s": None, "kernel_ratio": None, "payload_ratio": None, "unfanned_per_s": None}
+    if hosts and (run_dir / TESTBED_FILE).exists():
+        checks = list(json.loads((run_dir / TESTBED_FILE).read_text())["bytes"].values())
+        if checks:
+            row["kernel_tx_per_host_per_s"] = _mean(c["kernel_tx"] for c in checks) / duration
+            row["kernel_ratio"] = _mean(c["ratio"] for c in checks)
+            row["payload_ratio"] = _mean(c["payload_ratio"] for c in checks)
+            row["unfanned_per_s"] = _mean(c["unfanned_tx"] for c in checks) / duration
+    return row
+
+
+def _latency(team: list[dict]) -> float | None:
+    """Mean belief latency over the fleet's received beliefs: the agents' means weighted by their counts."""
+    parts = [a["belief_latency_s"] for a in team if (a.get("belief_latency_s") or {}).get("count")]
+    count = sum(p["count"] for p in parts)
+    return sum(p["mean"] * p["count"] for p in parts) / count if count else None
+
+
+def _mean(values) -> float | None:
+    values = [v for v in values if v is not None]
+    return sum(values) / len(values) if values else None
+
+
+def _add_ratios(rows: list[dict]) -> None:
+    """Each run against the single-host run; the tbf cap against the radio cap."""
+    by = {r["run"]: r for r in rows}
+    for row in rows:
+        against = by["radio cap"] if row["run"] == "tbf cap" else by["single host"]
+        row["against"] = against["run"]
+        row["rmse_vs"] = ratio(row["rmse"], against["rmse"])
+        row["rmse_ratio_vs"] = ratio(row["rmse_ratio_to_oracle"], against["rmse_ratio_to_oracle"])
+        row["bytes_ratio_vs"] = ratio(row["bytes_per_agent_per_s"], against["bytes_per_agent_per_s"])
+        row["received_ratio_vs"] = ratio(row["received_per_agent_per_s"], against["received_per_agent_per_s"])
+
+
+def _within(value: float | None) -> bool | None:
+    return None if value is None else abs(value - 1.0) <= GOAL
+
+
+def _goals(rows: list[dict]) -> dict:
+    """The issue's goals; ``None`` (not measured) for the caps' under ``--quick``."""
+    by = {r["run"]: r for r in rows}
+    tbf = by.get("tbf cap", {})
+    return {
+        "testbed_rmse_ratio_within_10pct": _within(by["testbed"]["rmse_ratio_vs"]),
+        "testbed_no_missed_steps": by["testbed"]["missed_steps"] == 0,
+        "tbf_vs_radio_received_bytes_within_10pct": _within(tbf.get("received_ratio_vs")),
+        "tbf_vs_radio_fleet_rmse_within_10pct": _within(tbf.get("rmse_vs")),
+    }
+
+
+def report(result: dict, console=None) -> None:
+    console = console or common.make_console()
+    s = result["settings"]
+    common.print_table(
+        console, f"One host vs one namespace and router per agent — {s['agents']} agents, {s['duration_s']:g} s, "
+                 f"seed {s['seed']}, bearing sensor",
+        ["run", "status", "RMSE [m]", "vs", "÷ oracle", "vs", "ANEES", "latency [s]", "missed steps", "sent B/s", "vs",
+         "received B/s", "vs", "kernel tx B/s/host", "kernel ÷ E", "payload ÷ E"],
+        [(r["run"], r["status"], fmt(r["rmse"], ".2f"), fmt_ratio(r["rmse_vs"]), fmt(r["rmse_ratio_to_oracle"], ".2f"),
+          fmt_ratio(r["rmse_ratio_vs"]), fmt(r["anees"], ".2f"), fmt(r.get("belief_latency_s"), ".3f"),
+          fmt(r["missed_steps"], ".1%"),
+          fmt(r["bytes_per_agent_per_s"], ",.0f"), fmt_ratio(r["bytes_ratio_vs"]),
+          fmt(r["received_per_agent_per_s"], ",.0f"), fmt_ratio(r["received_ratio_vs"]),
+          fmt(r["kernel_tx_per_host_per_s"], ",.0f"), fmt(r["kernel_ratio"], ".2f"), fmt(r["payload_ratio"], ".2f"))
+         for r in result["rows"]],
+        caption=f"\"vs\": the ratio to the single-host run (the tbf cap's: to the radio cap's). Caps: radio "
+                f"{s['link_cap']:g} B/s per link; tbf per UAV host = (that × (N − 1) + what only the ground receives) "
+                "× the testbed's kernel ÷ E. Sent/received: the agents' own accounting, per agent. E: the expected "
+                "bytes of mesh_sim.testbed.bytes_check. Where the cap also starves the oracle's inputs (tbf), compare "
+                "fleet RMSE, not ÷ oracle.")
+    common.print_table(console, "Goals (issue 17)", ["goal", "met"],
+                       [(name, common.verdict(ok)) for name, ok in result["goals"].items()])

@@ -1,0 +1,73 @@
+"""``skymesh bench testbed`` (mesh_sim/bench/testbed.py): its ratios and goals, its error without namespaces, and
+its smallest live run (root only: skipped with the reason otherwise), which leaves no process, folder or
+namespace behind."""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+
+from mesh_sim import cli, netns
+from mesh_sim.bench import testbed as bench
+from tests.processes import assert_no_children_left
+
+
+def _row(run: str, rmse_ratio: float, bytes_s: float, received: float, missed: float = 0.0) -> dict:
+    return {"run": run, "status": "completed", "rmse": 1.0, "anees": 0.6, "rmse_ratio_to_oracle": rmse_ratio,
+            "bytes_per_agent_per_s": bytes_s, "received_per_agent_per_s": received, "missed_steps": missed,
+            "tbf_rate": None, "kernel_tx_per_host_per_s": None, "kernel_ratio": None, "payload_ratio": None,
+            "unfanned_per_s": None}
+
+
+def test_ratios_are_against_the_single_host_run_and_tbf_against_the_radio_cap(printed):
+    rows = [_row("single host", 1.10, 3000, 9000), _row("testbed", 1.15, 3100, 9300, missed=0.01),
+            _row("radio cap", 1.4, 1500, 4000), _row("tbf cap", 1.68, 3000, 3800)]
+    bench._add_ratios(rows)
+    by = {r["run"]: r for r in rows}
+    assert by["testbed"]["rmse_ratio_vs"] == pytest.approx(1.15 / 1.10)
+    assert by["testbed"]["bytes_ratio_vs"] == pytest.approx(3100 / 3000)
+    assert by["tbf cap"]["against"] == "radio cap" and by["tbf cap"]["received_ratio_vs"] == pytest.approx(0.95)
+    assert by["tbf cap"]["bytes_ratio_vs"] == pytest.approx(2.0)
+    goals = bench._goals(rows)
+    assert by["tbf cap"]["rmse_vs"] == 1.0  # fleet RMSE: the same here, although its ratio to the oracle's is not
+    assert goals == {"testbed_rmse_ratio_within_10pct": True, "testbed_no_missed_steps": False,
+                     "tbf_vs_radio_received_bytes_within_10pct": True, "tbf_vs_radio_fleet_rmse_within_10pct": True}
+    text = printed(bench, {"settings": {"agents": 4, "duration_s": 15.0, "seed": 1, "link_cap": 1500.0},
+                           "rows": rows, "goals": goals})
+    assert "single host" in text and "tbf cap" in text and "1.05x" in text
+    quick = rows[:2]  # --quick: no caps, their goals not measured
+    assert bench._goals(quick)["tbf_vs_radio_fleet_rmse_within_10pct"] is None
+
+
+def test_without_namespaces_the_benchmark_says_why(monkeypatch, capsys):
+    monkeypatch.setattr(netns, "unavailable", lambda: "network namespaces need root (ip netns add)")
+    assert cli.main(["bench", "testbed", "--quick"]) == cli.EXIT_USAGE
+    assert capsys.readouterr().err == ("skymesh bench testbed: skymesh bench testbed needs network namespaces: "
+                                       "network namespaces need root (ip netns add)\n")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(netns.unavailable() is not None, reason=str(netns.unavailable()))
+def test_smallest_live_run(private_tmp):
+    before = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
+    result = bench.run(agents=2, duration=8.0)  # full: the caps too
+    assert_no_children_left()
+    assert list(private_tmp.iterdir()) == []
+    assert subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout == before
+    rows = {r["run"]: r for r in result["rows"]}
+    assert list(rows) == ["single host", "testbed", "radio cap", "tbf cap"]
+    assert all(r["status"] == "completed" and r["rmse"] is not None for r in rows.values()), rows
+    bed = rows["testbed"]
+    assert bed["kernel_tx_per_host_per_s"] > 0 and 1.0 < bed["payload_ratio"] < bed["kernel_ratio"]
+    one_peer = bench.LINK_CAP * 1 + bed["unfanned_per_s"]
+    assert rows["tbf cap"]["tbf_rate"] == pytest.approx(one_peer * bed["kernel_ratio"])
+    assert rows["single host"]["rmse_ratio_vs"] == 1.0
+    assert all(0 < r["belief_latency_s"] < 5 for r in rows.values()), rows
+
+
+def test_belief_latency_is_weighted_by_the_beliefs_received():
+    team = [{"belief_latency_s": {"mean": 0.2, "count": 3}}, {"belief_latency_s": {"mean": 0.6, "count": 1}},
+            {"belief_latency_s": {"mean": None, "count": 0}}]
+    assert bench._latency(team) == pytest.approx(0.3)
+    assert bench._latency([{}]) is None
