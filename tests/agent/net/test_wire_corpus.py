@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 from agent import agent as agent_module
 from agent.agent import Agent
 from agent.config import AgentScenario
+from agent.net import roster, wire
 from agent.net.bus import InMemoryBus
 from agent.net.gaussian_codec import encode_trajectory
 from agent.net.keys import Incoming, Keys
@@ -213,7 +214,8 @@ def receiver(policy: str, legacy: bool) -> Receiver:
 @given(which=st.sampled_from(["flood", "hybrid", "truth"]), mutations=st.lists(_MUTATION, min_size=1, max_size=3))
 def test_mutated_messages_are_accepted_by_both_decoders_or_by_neither(which, mutations, model, monkeypatch):
     """Random byte edits of valid messages (a flipped byte, one deleted or inserted): the typed decoder must
-    not accept what the v1 path rejected, nor the reverse."""
+    not accept what the v1 path rejected, nor the reverse — but for the two documented differences: a field
+    nobody reads (v1 refused it), and a name outside the fleet that an edit made (v1 did not judge names)."""
     policy = "flood" if which == "flood" else "hybrid"
     kind = "truth" if which == "truth" else "track"
     payload = {"flood": flood_payload, "hybrid": lambda: track_payload(model), "truth": lambda: TRUTH}[which]()
@@ -228,8 +230,11 @@ def test_mutated_messages_are_accepted_by_both_decoders_or_by_neither(which, mut
             data.insert(at, value)
     new = receiver(policy, False).accepts(kind, bytes(data), monkeypatch)
     old = receiver(policy, True).accepts(kind, bytes(data), monkeypatch)
-    if new[0] and not old[0]:  # the documented difference only: the v1 decoder refused a field nobody reads
+    if new[0] and not old[0]:  # a documented difference: the v1 decoder refused a field nobody reads
         assert has_unknown_field(bytes(data)), (new, old)
+    elif old[0] and new == (False, "unknown_name"):  # the other: v1 did not judge names (agent.net.roster)
+        envelope = wire.decode(bytes(data))  # what the edit made of the message's names (the receivers' fleet: 2)
+        assert roster.strangers(envelope.kind, envelope.acks, envelope.payload, {"uav0", "uav1"}), (new, old)
     else:
         assert new[0] == old[0], (new, old)
 
