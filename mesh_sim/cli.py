@@ -175,6 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
     router.add_argument("--config", required=True, metavar="FILE",
                         help="a Zenoh JSON5 config file, e.g. deploy/router.json5 (relative paths in it are read "
                              "from the current folder)")
+    router.add_argument("--parent-pid", type=int, metavar="PID",
+                        help="stop when this process (the one that started the router) is gone")
     return parser
 
 

@@ -9,9 +9,10 @@ command needs nothing beyond the ``eclipse-zenoh`` wheel the agents already use,
 mode whatever its ``mode`` says.
 
 The process prints the endpoints it listens on (as configured) and whether mTLS and access control are on,
-then runs until SIGINT or SIGTERM (exit 0). A config file that is missing, unreadable or refused by Zenoh
-(a syntax error, an unknown field, a certificate that cannot be read, a port in use) is one line on stderr
-and exit code 2.
+then runs until SIGINT or SIGTERM (exit 0) or, with ``--parent-pid``, until that process is gone (exit 0: a
+launcher that was SIGKILLed — ``skymesh testbed`` starts one router per host — leaves no router behind). A
+config file that is missing, unreadable or refused by Zenoh (a syntax error, an unknown field, a certificate
+that cannot be read, a port in use) is one line on stderr and exit code 2.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import threading
 import zenoh
 
 from agent.net.zenoh_transport import SessionError, load_config, open_session
-from agent.runtime import install_stop_handlers, usage_error
+from agent.runtime import install_stop_handlers, parent_alive, usage_error
 
 
 def open_router(config_file: str) -> tuple[zenoh.Session, str]:
@@ -44,8 +45,9 @@ def describe(config: zenoh.Config) -> str:
             f"access control {'on' if acl else 'OFF'}")
 
 
-def run(config_file: str, stop: threading.Event) -> int:
-    """Serve until ``stop`` is set; the exit code."""
+def run(config_file: str, stop: threading.Event, parent_pid: int | None = None) -> int:
+    """Serve until ``stop`` is set or the process ``parent_pid`` (given: this one's parent) is gone; the exit
+    code."""
     try:
         session, summary = open_router(config_file)
     except (ValueError, SessionError) as err:
@@ -53,7 +55,9 @@ def run(config_file: str, stop: threading.Event) -> int:
     try:
         print(f"skymesh router {session.info.zid()}: {summary}", flush=True)
         while not stop.wait(0.5):  # a bounded wait: the signal handler runs between waits
-            pass
+            if parent_pid is not None and not parent_alive(parent_pid):
+                print(f"skymesh router: parent process {parent_pid} is gone; stopping", flush=True)
+                break
     finally:
         session.close()
     return 0
@@ -64,4 +68,4 @@ def run_from_args(args: argparse.Namespace) -> int:
     zenoh.init_log_from_env_or("error")
     stop = threading.Event()
     install_stop_handlers(stop)
-    return run(args.config, stop)
+    return run(args.config, stop, args.parent_pid)

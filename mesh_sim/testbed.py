@@ -23,6 +23,7 @@ lack ``netem``; delay and loss stay the emulated radio's.)
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -98,7 +99,8 @@ class Routers:
                 with open(folder / "logs" / f"router-{host.name}.log", "wb") as log:
                     self.processes.append(subprocess.Popen(
                         [*net.exec_prefix(host.name), sys.executable, "-m", "mesh_sim", "router", "--config",
-                         str(config)], stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env))
+                         str(config), "--parent-pid", str(os.getpid())],
+                        stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env))
             for host in hosts:
                 self._wait_listening(folder / "logs" / f"router-{host.name}.log", host.name)
         except BaseException:
