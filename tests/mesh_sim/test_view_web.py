@@ -20,6 +20,7 @@ from mesh_sim import cli
 from mesh_sim.launcher import free_port
 from mesh_sim.observer import TRUTH_COLOUR
 from mesh_sim.observer import main as observer_main
+from mesh_sim.observer_web import network_host
 from tests.headless_chromium import Chromium, find_chromium
 
 REPO = Path(__file__).resolve().parents[2]
@@ -52,8 +53,8 @@ def stop(proc: subprocess.Popen, signum: int = signal.SIGTERM) -> int:
         proc.stderr.close()
 
 
-def web_args(web_port: int, grpc_port: int) -> list[str]:
-    return ["--web", str(web_port), "--grpc-port", str(grpc_port), "--web-host", "127.0.0.1"]
+def web_args(web_port: int, grpc_port: int, host: str | None = "127.0.0.1") -> list[str]:
+    return ["--web", str(web_port), "--grpc-port", str(grpc_port), *(["--web-host", host] if host else [])]
 
 
 def fetch(url: str) -> tuple[int, str, bytes]:
@@ -99,6 +100,36 @@ def test_the_page_is_rerun_s_web_viewer_with_its_wasm(served):
     assert b"<title>Rerun Viewer</title>" in page and b"re_viewer_bg.wasm" in page
     status, kind, wasm = fetch(f"http://127.0.0.1:{web_port}/re_viewer_bg.wasm")
     assert status == 200 and kind == "application/wasm" and wasm[:4] == b"\0asm"
+
+
+def allowed_origin(grpc_port: int, origin: str) -> str | None:
+    """The origin the data server allows in its answer to a browser's CORS preflight from ``origin``."""
+    ask = urllib.request.Request(f"http://127.0.0.1:{grpc_port}/rerun.sdk_comms.v1alpha1.MessageProxyService/"
+                                 "ReadMessages", method="OPTIONS",
+                                 headers={"Origin": origin, "Access-Control-Request-Method": "POST",
+                                          "Access-Control-Request-Headers": "content-type,x-grpc-web"})
+    with urllib.request.urlopen(ask, timeout=10) as reply:
+        return reply.headers.get("Access-Control-Allow-Origin")
+
+
+@pytest.mark.slow
+def test_the_data_server_lets_the_printed_page_read_it_across_the_network(recording):
+    """Rerun's gRPC server answers only pages of localhost by default: a browser on another machine, on the
+    page at the printed (network) address, would get no data (seen in Chromium: the welcome screen)."""
+    web_port, grpc_port = free_port(), free_port()
+    proc, url = start_view(*web_args(web_port, grpc_port, "groundstation.example"), "--recording", str(recording))
+    try:
+        assert url.startswith(f"http://groundstation.example:{web_port}/?url=rerun%2Bhttp%3A%2F%2Fgroundstation")
+        page = f"http://groundstation.example:{web_port}"
+        assert allowed_origin(grpc_port, page) == page
+        assert allowed_origin(grpc_port, "http://groundstation.example:1") is None  # another page: refused
+    finally:
+        stop(proc)
+
+
+def test_the_network_host_is_an_address_of_this_machine():
+    with socket.socket() as s:
+        s.bind((network_host(), 0))  # only this machine's own addresses can be bound
 
 
 @pytest.mark.slow
@@ -214,26 +245,37 @@ def changed(shot: np.ndarray, blank: np.ndarray) -> float:
     return float((world(shot) != world(blank)).any(axis=2).mean())
 
 
-@pytest.mark.slow
-def test_the_3d_view_renders_in_headless_chromium(served):
-    """The page, drawn by a real browser, is not blank: its 3D view differs from about:blank (measured: 27 % of
-    its pixels once drawn; 2.6 % on the viewer's empty light screen) and shows the truth targets in their
-    colour (215 pixels once drawn, none on the loading or the empty screen)."""
+@pytest.fixture(scope="module")
+def chromium() -> str:
+    """Chromium's executable; the test is skipped (before the recording is made) on a machine without one."""
     executable = find_chromium()
     if executable is None:
         pytest.skip("no Chromium on this machine (Debian: apt-get install chromium)")
-    with Chromium(executable) as browser:
-        blank = browser.screenshot(browser.open("about:blank"))
-        tab = browser.open(served[0])
-        start = time.monotonic()
-        shot = browser.screenshot(tab)
-        assert truth_pixels(shot) == 0  # the (dark) loading screen has none of the targets' colour
-        while not (truth_pixels(shot) >= 50 and changed(shot, blank) > 0.1) \
-                and time.monotonic() - start < RENDER_TIMEOUT_S:
-            time.sleep(2.0)
+    return executable
+
+
+@pytest.mark.slow
+def test_the_3d_view_renders_in_headless_chromium(chromium, recording):
+    """The page at the printed URL (this machine's network address, as a browser elsewhere opens it), drawn by a
+    real browser, is not blank: its 3D view differs from about:blank (measured: 27 % of its pixels once drawn;
+    2.6 % on the viewer's empty light screen) and shows the truth targets in their colour (215 pixels once
+    drawn, none on the loading screen, the welcome screen or the empty one)."""
+    proc, url = start_view(*web_args(free_port(), free_port(), host=None), "--recording", str(recording))
+    try:
+        with Chromium(chromium) as browser:
+            blank = browser.screenshot(browser.open("about:blank"))
+            tab = browser.open(url)
+            start = time.monotonic()
             shot = browser.screenshot(tab)
-        print(f"3D view drawn after {time.monotonic() - start:.1f} s: {truth_pixels(shot)} target pixels, "
-              f"{changed(shot, blank):.0%} of the view changed")
+            assert truth_pixels(shot) == 0  # the (dark) loading screen has none of the targets' colour
+            while not (truth_pixels(shot) >= 50 and changed(shot, blank) > 0.1) \
+                    and time.monotonic() - start < RENDER_TIMEOUT_S:
+                time.sleep(2.0)
+                shot = browser.screenshot(tab)
+            print(f"3D view drawn after {time.monotonic() - start:.1f} s: {truth_pixels(shot)} target pixels, "
+                  f"{changed(shot, blank):.0%} of the view changed ({url})")
+    finally:
+        stop(proc)
     assert shot.shape == blank.shape
     assert changed(shot, blank) > 0.1
     assert truth_pixels(shot) >= 50
