@@ -20,7 +20,10 @@
   root); a link taken down and up mid-run, the kernel's rate cap on every UAV host; ``testbed.json`` in the run folder;
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
 * ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``), with this
-  environment's Rerun viewer (``mesh_sim.viewer``) unless ``--save`` or ``--connect-viewer`` is given;
+  environment's Rerun viewer (``mesh_sim.viewer``) unless ``--save``, ``--connect-viewer`` or ``--web`` is given;
+  ``--web [PORT] [--grpc-port P] [--web-host HOST]`` serves Rerun's web viewer instead and prints the URL a
+  browser opens, until SIGINT / SIGTERM; ``skymesh view --web --recording FILE`` serves an .rrd the same way
+  (``mesh_sim.observer_web``);
 * ``skymesh compare BEFORE AFTER [--plain] [--limit N]`` — compare two run folders exactly, volatile fields
   (pids, CPU and wall times, ...) aside (``mesh_sim.run_compare``): exit 0 identical, 1 different;
 * ``skymesh compare --tree BEFORE_ROOT AFTER_ROOT [--details]`` — pair the run folders of two roots by

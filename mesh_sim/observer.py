@@ -39,6 +39,9 @@ Run as a process (the launcher stops it with SIGTERM; it also exits when its par
 
 ``--parent-pid PID`` makes it exit when PID is no longer its parent (default: its parent at start).
 
+``--web [PORT]`` serves Rerun's web viewer and the recording to browsers instead of the other sinks, and prints
+the URL to open (:mod:`mesh_sim.observer_web`; ``--grpc-port``, ``--web-host``).
+
 ``--spawn`` starts this environment's Rerun viewer (``mesh_sim.viewer``: the ``rerun`` beside the Python running
 this, else on ``PATH``); no viewer or no display is one line and exit code 2 before anything starts.
 
