@@ -8,7 +8,8 @@ its network (:func:`network_host`), not loopback, as the browser is usually on a
 only answers pages of localhost and of that printed origin (CORS), so it is allowed explicitly.
 
 A recording (``--recording RUN/recording.rrd``) is served the same way: the file is loaded into a recording
-whose gRPC server the page reads, so a live fleet and a finished run look and behave alike.
+stream of the file's own application and recording id (so the viewer lists one recording, not the file's and an
+empty one) whose gRPC server the page reads; a live fleet and a finished run look and behave alike.
 
 Ports are checked before serving: rerun-sdk only logs a gRPC port in use and goes on serving nothing, so a
 port in use is a :class:`~mesh_sim.viewer.ViewerError` here (one line, exit code 2), as is a recording that is
@@ -24,11 +25,11 @@ from pathlib import Path
 from urllib.parse import quote
 
 import rerun as rr
+from rerun.chunk import RrdReader, StoreEntry
 
 from mesh_sim.viewer import ViewerError
 from mesh_sim.web_options import Web
 
-RRD_MAGIC = b"RRF"  # the first bytes of every .rrd file (RRF2 in rerun 0.41)
 PROBE_ADDRESS = ("192.0.2.1", 9)  # TEST-NET-1: a UDP "connect" to it only picks the outgoing interface; nothing is sent
 
 
@@ -52,15 +53,20 @@ def require_free_port(port: int, what: str) -> None:
             raise ViewerError(f"cannot serve the {what} on port {port}: {err.strerror}") from None
 
 
-def require_recording(path: Path) -> None:
-    """:class:`ViewerError` unless ``path`` is a readable Rerun recording (an .rrd file)."""
+def recording_of(path: Path) -> StoreEntry:
+    """The (first) recording stored in the .rrd at ``path``: its application and recording id. A
+    :class:`ViewerError` if the file cannot be read or holds no Rerun recording."""
     try:
-        with open(path, "rb") as f:
-            head = f.read(len(RRD_MAGIC))
+        open(path, "rb").close()  # the OS's own words for a missing or unreadable file
     except OSError as err:
         raise ViewerError(f"{path}: {err.strerror}") from None
-    if head != RRD_MAGIC:
-        raise ViewerError(f"{path}: not a Rerun recording (an .rrd file starts with {RRD_MAGIC.decode()})")
+    try:
+        stores = RrdReader(str(path)).recordings()
+    except RuntimeError as err:  # "Not an RRD file: expected FourCC header ..."
+        raise ViewerError(f"{path}: not a Rerun recording ({str(err).rsplit(': ', 1)[-1]})") from None
+    if not stores:
+        raise ViewerError(f"{path}: holds no Rerun recording (only a layout)")
+    return stores[0]
 
 
 def serve_web(rec: rr.RecordingStream, web: Web) -> str:
@@ -82,8 +88,8 @@ def serve_web(rec: rr.RecordingStream, web: Web) -> str:
 
 def serve_recording(path: Path, web: Web) -> tuple[rr.RecordingStream, str]:
     """Serve the .rrd at ``path`` to browsers (:func:`serve_web`); the recording holding the servers, and the URL."""
-    require_recording(path)
-    rec = rr.RecordingStream("skymesh", recording_id=str(path))
+    stored = recording_of(path)
+    rec = rr.RecordingStream(stored.application_id, recording_id=stored.recording_id)
     url = serve_web(rec, web)
     rec.log_file_from_path(path)
     return rec, url

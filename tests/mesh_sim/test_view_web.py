@@ -15,12 +15,14 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 import pytest
+import rerun as rr
+import rerun.blueprint as rrb
 
 from mesh_sim import cli
 from mesh_sim.launcher import free_port
 from mesh_sim.observer import TRUTH_COLOUR
 from mesh_sim.observer import main as observer_main
-from mesh_sim.observer_web import network_host
+from mesh_sim.observer_web import network_host, recording_of
 from tests.headless_chromium import Chromium, find_chromium
 
 REPO = Path(__file__).resolve().parents[2]
@@ -192,20 +194,31 @@ def test_a_port_in_use_for_a_live_fleet_is_one_line_exit_2(zenoh_router, taken_p
 
 @pytest.fixture
 def recording_stub(tmp_path) -> Path:
-    """A file that starts as an .rrd does (the bad-port tests fail before reading further)."""
+    """A small recording made here: one point."""
     path = tmp_path / "recording.rrd"
-    path.write_bytes(b"RRF2" + bytes(60))
+    rec = rr.RecordingStream("skymesh", recording_id="stub")
+    rec.save(str(path))
+    rec.log("world/point", rr.Points3D([[0.0, 0.0, 0.0]]))
+    rec.disconnect()
     return path
+
+
+def test_a_recording_is_served_as_its_own_recording_not_beside_an_empty_one(recording_stub):
+    stored = recording_of(recording_stub)
+    assert (stored.application_id, stored.recording_id) == ("skymesh", "stub")
 
 
 @pytest.mark.parametrize("name, reason", [
     ("missing.rrd", "No such file or directory"),
     (".", "Is a directory"),
-    ("notes.txt", "not a Rerun recording (an .rrd file starts with RRF)"),
+    ("notes.txt", 'not a Rerun recording (expected FourCC header "RRF2", got "hell")'),
+    ("layout.rbl", "holds no Rerun recording (only a layout)"),
 ])
 def test_a_missing_or_unreadable_recording_is_one_line_exit_2(tmp_path, capsys, name, reason):
-    """Bad input: a recording that does not exist, a folder, a file that is not an .rrd."""
-    (tmp_path / "notes.txt").write_text("hello")
+    """Bad input: a recording that does not exist, a folder, a file that is not an .rrd, an .rrd-format file
+    holding only a blueprint."""
+    (tmp_path / "notes.txt").write_text("hello, these are notes\n" * 10)
+    rrb.Blueprint(rrb.Spatial3DView()).save("skymesh", str(tmp_path / "layout.rbl"))
     path = tmp_path / name
     err = one_line_exit_2(capsys, ["view", *web_args(free_port(), free_port()), "--recording", str(path)])
     assert err == f"skymesh view: {path}: {reason}\n"
