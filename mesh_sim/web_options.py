@@ -22,11 +22,19 @@ class Web(NamedTuple):
     host: str | None = None
 
 
+def port(text: str) -> int:
+    """A TCP port to listen on, 1..65535 (0 would let the OS choose one the printed URL could not name)."""
+    value = int(text) if text.isdigit() else -1
+    if not 1 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"must be a TCP port, 1..65535; got {text!r}")
+    return value
+
+
 def add_web_arguments(p: argparse.ArgumentParser) -> None:
     """``--web [PORT]``, ``--grpc-port`` and ``--web-host``."""
-    p.add_argument("--web", type=int, nargs="?", const=WEB_PORT, metavar="PORT",
+    p.add_argument("--web", type=port, nargs="?", const=WEB_PORT, metavar="PORT",
                    help=f"serve Rerun's web viewer on this HTTP port (default {WEB_PORT}) and print its URL")
-    p.add_argument("--grpc-port", type=int, default=GRPC_PORT, metavar="PORT",
+    p.add_argument("--grpc-port", type=port, default=GRPC_PORT, metavar="PORT",
                    help=f"with --web: the port the page reads the data from (default {GRPC_PORT})")
     p.add_argument("--web-host", metavar="HOST",
                    help="with --web: the name or address browsers reach this machine at (default: its address on "

@@ -233,6 +233,14 @@ def test_view_without_what_to_view_is_one_line_exit_2(capsys, argv, says):
     assert says in one_line_exit_2(capsys, argv)
 
 
+@pytest.mark.parametrize("flag, value", [("--web", "0"), ("--web", "70000"), ("--grpc-port", "x")])
+def test_a_port_that_is_no_tcp_port_is_refused_exit_2(capsys, flag, value):
+    with pytest.raises(SystemExit) as stopped:
+        cli.main(["view", "--web", "9090", "--recording", "r.rrd", flag, value])
+    assert stopped.value.code == 2
+    assert f"{flag}: must be a TCP port, 1..65535; got {value!r}" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("flag", [["--save", "x.rrd"], ["--connect-viewer", "rerun+http://127.0.0.1:1/proxy"],
                                   ["--spawn"]])
 def test_web_with_another_sink_is_one_line_exit_2(capsys, flag):
