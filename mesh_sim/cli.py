@@ -20,7 +20,10 @@
   root); a link taken down and up mid-run, the kernel's rate cap on every UAV host; ``testbed.json`` in the run folder;
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
 * ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``), with this
-  environment's Rerun viewer (``mesh_sim.viewer``) unless ``--save`` or ``--connect-viewer`` is given;
+  environment's Rerun viewer (``mesh_sim.viewer``) unless ``--save``, ``--connect-viewer`` or ``--web`` is given;
+  ``--web [PORT] [--grpc-port P] [--web-host HOST]`` serves Rerun's web viewer instead and prints the URL a
+  browser opens, until SIGINT / SIGTERM; ``skymesh view --web --recording FILE`` serves an .rrd the same way
+  (``mesh_sim.observer_web``);
 * ``skymesh compare BEFORE AFTER [--plain] [--limit N]`` — compare two run folders exactly, volatile fields
   (pids, CPU and wall times, ...) aside (``mesh_sim.run_compare``): exit 0 identical, 1 different;
 * ``skymesh compare --tree BEFORE_ROOT AFTER_ROOT [--details]`` — pair the run folders of two roots by
@@ -52,6 +55,7 @@ from agent.sensors.registry import SENSORS
 from mesh_sim.autopilot.options import add_arguments as add_autopilot_arguments
 from mesh_sim.bench import BENCHMARKS
 from mesh_sim.bench.common import make_console, write_json
+from mesh_sim.web_options import add_web_arguments, web_of
 
 STOPPED_BY = {"interrupted": 130, "terminated": 143}  # a run stopped by SIGINT / SIGTERM: 128 + the signal
 #: benchmark options beyond --quick and --json, for the benchmarks naming them
@@ -141,12 +145,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     view = commands.add_parser("view", help="the ground station: log a fleet to Rerun",
                                description="Subscribe to a fleet on Zenoh and log it to Rerun.")
-    view.add_argument("--fleet", required=True)
+    view.add_argument("--fleet", help="the fleet to watch (required unless --recording is given)")
     view.add_argument("--connect", action="append", default=[], help="Zenoh router endpoint")
     view.add_argument("--zenoh-config", help="a Zenoh JSON5 config file")
     view.add_argument("--save", help="write the recording to this .rrd file")
     view.add_argument("--connect-viewer", help="stream to a Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
     view.add_argument("--duration", type=float, help="stop after this many seconds")
+    add_web_arguments(view)
+    view.add_argument("--recording", type=Path, metavar="FILE",
+                      help="with --web: serve this .rrd (e.g. RUN/recording.rrd) instead of a live fleet")
 
     compare = commands.add_parser(
         "compare", help="compare two run folders exactly (volatile fields aside)",
@@ -316,18 +323,41 @@ def _cameras(specs: list[str], agents: int) -> dict[str, str]:
 
 
 def _view(args) -> int:
+    if args.recording is not None:
+        return _view_recording(args)
+    if args.fleet is None:
+        return usage_error("skymesh view", "give --fleet NAME (a live fleet) or --web --recording FILE")
     from mesh_sim.observer import main as observer_main
 
     argv = ["--fleet", args.fleet]
     for endpoint in args.connect:
         argv += ["--connect", endpoint]
     for flag, value in (("--zenoh-config", args.zenoh_config), ("--save", args.save),
-                        ("--connect-viewer", args.connect_viewer), ("--duration", args.duration)):
+                        ("--connect-viewer", args.connect_viewer), ("--duration", args.duration),
+                        ("--web", args.web), ("--grpc-port", args.grpc_port), ("--web-host", args.web_host)):
         if value is not None:
             argv += [flag, str(value)]
-    if args.save is None and args.connect_viewer is None:
+    if args.save is None and args.connect_viewer is None and args.web is None:
         argv.append("--spawn")
     return observer_main(argv)
+
+
+def _view_recording(args) -> int:
+    """``skymesh view --web --recording FILE``: a finished run's recording served to browsers until stopped."""
+    if args.web is None:
+        return usage_error("skymesh view", "--recording is served with --web (open it natively with "
+                           f"`{_viewer()} {args.recording}`)")
+    if args.fleet or args.connect or args.zenoh_config or args.save or args.connect_viewer or args.duration:
+        return usage_error("skymesh view", "--recording serves a file: give it without --fleet, --connect, "
+                           "--zenoh-config, --save, --connect-viewer and --duration")
+    from mesh_sim.observer_web import serve_recording_until_stopped
+    from mesh_sim.viewer import ViewerError
+
+    try:
+        serve_recording_until_stopped(args.recording, web_of(args))
+    except ViewerError as err:
+        return usage_error("skymesh view", err)
+    return 0
 
 
 def _compare(args) -> int:

@@ -39,6 +39,9 @@ Run as a process (the launcher stops it with SIGTERM; it also exits when its par
 
 ``--parent-pid PID`` makes it exit when PID is no longer its parent (default: its parent at start).
 
+``--web [PORT]`` serves Rerun's web viewer and the recording to browsers instead of the other sinks, and prints
+the URL to open (:mod:`mesh_sim.observer_web`; ``--grpc-port``, ``--web-host``).
+
 ``--spawn`` starts this environment's Rerun viewer (``mesh_sim.viewer``: the ``rerun`` beside the Python running
 this, else on ``PATH``); no viewer or no display is one line and exit code 2 before anything starts.
 
@@ -69,7 +72,9 @@ from mesh_sim.observer_blueprint import LIVE_METRICS, MAPS_LEGEND, fleet_bluepri
 from mesh_sim.observer_geometry import RAY_LENGTH, cov_to_ellipsoid, nearest_truth, ray_end
 from mesh_sim.observer_grids import LEGEND, GridImages
 from mesh_sim.observer_messages import parse_telemetry, parse_truth
+from mesh_sim.observer_web import serve_web
 from mesh_sim.viewer import viewer_to_spawn
+from mesh_sim.web_options import Web, add_web_arguments, web_of
 
 log = logging.getLogger("skymesh.observer")
 
@@ -129,6 +134,11 @@ class Observer:
         :class:`~mesh_sim.viewer.ViewerError` when there is no viewer or no display."""
         rr.spawn(port=port, connect=False, executable_path=viewer_to_spawn(), recording=self.rec)
         self._add_sink(rr.GrpcSink(f"rerun+http://127.0.0.1:{port}/proxy"))
+
+    def serve_web(self, web: Web) -> str:
+        """Serve the recording to browsers (:func:`mesh_sim.observer_web.serve_web`: it replaces the other sinks);
+        the URL to open."""
+        return serve_web(self.rec, web)
 
     def _add_sink(self, sink) -> None:
         self._sinks.append(sink)
@@ -297,7 +307,7 @@ class Observer:
 
 # -- the process -------------------------------------------------------------------------------------
 def run_observer(fleet: str, connect: list[str] | None, zenoh_config: str | None, save: str | None,
-                 connect_viewer: str | None, spawn: bool, duration: float | None, *,
+                 connect_viewer: str | None, spawn: bool, duration: float | None, *, web: Web | None = None,
                  recording_id: str | None = None, application_id: str = "skymesh",
                  fleet_key: bytes | None = None, parent_pid: int | None = None) -> Observer:
     """Watch ``fleet`` until ``duration`` s (wall clock) pass, SIGTERM/SIGINT arrives or the parent dies.
@@ -329,6 +339,8 @@ def run_observer(fleet: str, connect: list[str] | None, zenoh_config: str | None
             observer.connect(connect_viewer)
         if spawn:
             observer.spawn()
+        if web:
+            print(f"web viewer: {observer.serve_web(web)}", flush=True)
         deadline = None if duration is None else time.monotonic() + duration
         while not stop:
             for item in transport.drain():
@@ -361,6 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--save", metavar="PATH", help="write the recording to this .rrd file")
     p.add_argument("--connect-viewer", metavar="URL", help="stream to a Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
     p.add_argument("--spawn", action="store_true", help="start a live Rerun viewer (needs a display)")
+    add_web_arguments(p)
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of wall clock")
     p.add_argument("--recording-id", help="Rerun recording id (default: the fleet name)")
     p.add_argument("--application-id", default="skymesh", help="Rerun application id (default: skymesh)")
@@ -373,15 +386,19 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    if not (args.save or args.connect_viewer or args.spawn):
-        print("observer: nothing to do: give --save, --connect-viewer or --spawn", file=sys.stderr)
+    if not (args.save or args.connect_viewer or args.spawn or args.web is not None):
+        print("observer: nothing to do: give --save, --connect-viewer, --spawn or --web", file=sys.stderr)
+        return 2
+    if args.web is not None and (args.save or args.connect_viewer or args.spawn):
+        print("observer: --web serves the recording itself: give it without --save, --connect-viewer and --spawn",
+              file=sys.stderr)
         return 2
     try:
         if args.spawn:  # before the Zenoh session: no viewer or no display is said first, in one line
             viewer_to_spawn()
         obs = run_observer(args.fleet, args.connect, args.zenoh_config, args.save, args.connect_viewer, args.spawn,
-                           args.duration, recording_id=args.recording_id, application_id=args.application_id,
-                           parent_pid=args.parent_pid,
+                           args.duration, web=web_of(args), recording_id=args.recording_id,
+                           application_id=args.application_id, parent_pid=args.parent_pid,
                            fleet_key=read_key_file(args.fleet_key_file) if args.fleet_key_file else None)
     except (OSError, ValueError) as err:  # OSError: no router (SessionError), an unwritable --save, no viewer
         return usage_error("observer", err)
