@@ -23,7 +23,8 @@ FORGED = 10_000
 
 def _forge(launcher: Launcher, sent: list[int]) -> None:
     """Once the run is on, publish FORGED messages on the fleet's keys from a session of our own: tracks and
-    truths that claim to come from uav1 and from the world, half unsigned, half signed with a wrong key."""
+    truths that claim to come from uav1 and from the world, half unsigned, half signed with a wrong key, all with the
+    fleet's Zenoh encoding (a forger that knows the format: only the MAC stops it)."""
     deadline = time.time() + 60
     while time.time() < deadline and not launcher._epoch_file.exists():
         time.sleep(0.1)
@@ -39,7 +40,7 @@ def _forge(launcher: Launcher, sent: list[int]) -> None:
             else:
                 env = wire.Envelope(kind="truth", origin="world", seq=10**12 + n, stamp=1.0, payload=ghost_truth)
                 key = keys.sim("truth")
-            session.put(key, wire.encode(env, wrong))
+            session.put(key, wire.encode(env, wrong), encoding=zenoh.Encoding(wire.ZENOH_ENCODING))  # as the fleet's
             sent[0] += 1
             if n % 500 == 499:
                 time.sleep(0.2)  # a sustained attack over the run, not one burst the queues would drop

@@ -65,7 +65,10 @@ def test_the_roi_camera_detects_and_locates_as_the_whole_frame_camera(case):
     error = np.median if settings.get("speckle_rate") else np.mean
     assert error(roi_errors) == pytest.approx(error(full_errors), rel=0.1)
     assert roi["false_detections"] <= full["false_detections"]
-    assert roi["outcomes"] == full["outcomes"] == {}
+    # banding can fail the video source for a few frames (D(t) over its threshold: their bearings are dropped as
+    # video_failed); D(t) is measured on the preview in one and on the downsampled whole frame in the other
+    assert set(roi["outcomes"]) | set(full["outcomes"]) <= {"video_failed"}
+    assert abs(roi["outcomes"].get("video_failed", 0) - full["outcomes"].get("video_failed", 0)) <= 1
 
 
 def test_the_render_setting():
