@@ -223,7 +223,8 @@ def test_message_rates_follow_px4_defaults_and_set_message_interval():
             link.close()
     assert counts["GLOBAL_POSITION_INT"] == pytest.approx(100, rel=0.2)  # 50 Hz (MAVLINK_MODE_ONBOARD)
     assert counts["LOCAL_POSITION_NED"] == pytest.approx(20, abs=3)  # 10 Hz as requested
-    assert counts["HEARTBEAT"] in (2, 3)
+    # 1 Hz: 2 in the 2 s window, give or take the one a loaded machine delays across the window's edge (CI saw 1)
+    assert counts["HEARTBEAT"] in (1, 2, 3)
 
 
 def test_sigterm_stops_cleanly_and_writes_the_stats_file(tmp_path):
