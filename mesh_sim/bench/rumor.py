@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from mesh_sim import phases
 from mesh_sim.bench import common, rumor_jobs, rumor_stats
 from mesh_sim.bench.common import fmt
 
@@ -166,7 +167,7 @@ def run(
             "duration_s": duration, "agents": agents, "demo_duration_s": mode["demo_duration"], "workers": workers,
             "demo": demo, "partition": partition,
             "partition_events": partition_events(agents, duration) if partition else None,
-            "decorrelation_s": rumor_stats.DECORRELATION_S, "confidence": rumor_stats.CONFIDENCE,
+            "decorrelation_s": phases.DECORRELATION_S, "confidence": rumor_stats.CONFIDENCE,
             "diverged_tracks": rumor_jobs.DIVERGED_TRACKS,
         },
         "environment": common.environment(("numpy", "scipy")),

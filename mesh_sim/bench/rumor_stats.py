@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-from mesh_sim.phases import CONFIDENCE, DECORRELATION_S, anees_interval, independent_count  # noqa: F401 (re-exported)
+from mesh_sim.phases import CONFIDENCE, anees_interval, independent_count
 from mesh_sim.results import pooled
 
 ANEES_FLOOR = 0.5  # issue 11: an agent's ANEES below this is wastefully conservative
