@@ -173,6 +173,11 @@ class CBBA:
         self.stamps[self.me] = now
         return Bids({key: (winner, self.bids[key]) for key, winner in self.winners.items()}, dict(self.stamps))
 
+    def heard(self, sender: str, received: float) -> None:
+        """``s_ik = τ_r``: this vehicle heard from ``sender`` at ``received`` (a message of its bids, or one that
+        says only that it is there)."""
+        self.stamps[sender] = received
+
     def merge(self, sender: str, message: Bids, received: float) -> None:
         """Apply a neighbour's ``(z_k, y_k, s_k)`` by the decision rules of Table 1, then the timestamps and the
         bundle release of Eq. (7)."""
@@ -182,7 +187,7 @@ class CBBA:
         for key in set(message.winners) | set(self.winners):
             their_winner, their_bid = message.winners.get(key, (None, 0.0))
             self._decide(key, sender, their_winner, their_bid, theirs)
-        self.stamps[sender] = received  # s_ik = τ_r
+        self.heard(sender, received)
         for vehicle, stamp in theirs.items():
             if vehicle not in (self.me, sender):
                 self.stamps[vehicle] = max(self.stamps.get(vehicle, -math.inf), stamp)  # s_in = max(s_in, s_kn)

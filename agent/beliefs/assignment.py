@@ -7,8 +7,10 @@ Built when ``[tasking] planner = "assignment"``. Every step, after the other bel
 2. **bundle** (:meth:`tasking.cbba.CBBA.rebuild`): re-bid from the vehicle's current position, scored by
    thesis 000's petal value (4.1) with the range test of the health extension (§2.7.4);
 3. **bids** out (kind ``tasks``): per task the winner and bid this agent knows, with its timestamps and its
-   own position — when they changed, every ``period`` otherwise, and every step while a peer is within
-   ``CROWD`` minimum separations (the separation layer of the planner needs fresh positions);
+   own position — when a peer needs them (a winner changed or is disputed, a bid moved by more than
+   ``BID_TOLERANCE``, a track task by more than ``POSITION_TOLERANCE`` of ``match_radius``), every ``period``
+   otherwise, and every step while a peer is within ``CROWD`` minimum separations (the separation layer of
+   the planner needs fresh positions);
 4. **consensus** on receipt (:meth:`tasking.cbba.CBBA.merge`, Table 1 of Choi et al.).
 
 Task identity across agents: a search cell has the same key everywhere (``search:r:c``); a track is known
@@ -43,6 +45,8 @@ from tasking.tasks import Capability, Task
 
 TRACK = "track"
 CROWD = 4.0  # peers closer than this many minimum separations get the position every step
+BID_TOLERANCE = 0.05  # a winning bid that moved by less than this share of itself is not news (chosen here)
+POSITION_TOLERANCE = 0.2  # a task that moved by less than this share of match_radius is not news (chosen here)
 
 
 class AssignmentExchange:
@@ -66,8 +70,9 @@ class AssignmentExchange:
         self.peers: dict[str, np.ndarray] = {}  # peer -> its last reported position
         self._peer_heard: dict[str, float] = {}  # peer -> when its last bids arrived
         self.expired: list[tuple[float, str]] = []  # (t, vehicle) each time a silent vehicle's claims were released
-        self._sent: tuple | None = None
+        self._sent: dict | None = None  # task key -> (north, east, winner, bid) as last sent
         self._sent_at = -math.inf
+        self._disputed = False  # a peer said winners this vehicle disagrees with: it needs our bids
         self.changes = 0  # times this agent's own task changed
         self.timeline: list[tuple[float, dict[str, str]]] = []  # (t, {target label: believed server}) on change
         self.evaluated_until = -math.inf
@@ -111,16 +116,37 @@ class AssignmentExchange:
             del self._peer_heard[peer], self.peers[peer]
 
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
+        """The bids, when a peer needs them (:meth:`_news`) and every ``period`` otherwise; between those,
+        the position alone every step while a peer is crowding this vehicle."""
         bids = self.cbba.message(t)
-        entries = [[_wire_key(key), *map(float, self.tasks[key].position), winner, bid]
-                   for key, (winner, bid) in sorted(bids.winners.items()) if key in self.tasks]
-        digest = tuple((e[0], round(e[1]), round(e[2]), e[3], round(e[4], 3)) for e in entries)
-        if digest == self._sent and t - self._sent_at < self.config.period and not self._crowded():
-            return None
-        self._sent, self._sent_at = digest, t
+        held = {key: (*map(float, self.tasks[key].position), winner, bid)
+                for key, (winner, bid) in sorted(bids.winners.items()) if key in self.tasks}
         position = self.vehicle.state().position
-        return Outgoing({"at": (float(position[0]), float(position[1])), "stamps": dict(bids.stamps),
-                         "tasks": entries})
+        at = (float(position[0]), float(position[1]))
+        if not self._news(held) and t - self._sent_at < self.config.period:
+            return Outgoing({"at": at}) if self._crowded() else None
+        self._sent, self._sent_at, self._disputed = held, t, False
+        return Outgoing({"at": at, "stamps": dict(bids.stamps),
+                         "tasks": [[_wire_key(key), *entry] for key, entry in held.items()]})
+
+    def _news(self, held: dict) -> bool:
+        """Whether the bids hold news a peer needs, against what was last sent: a task or winner appeared,
+        left or changed; a peer said a winner this vehicle disagrees with (:meth:`receive`); a winning bid
+        moved by more than ``BID_TOLERANCE`` of itself; a task moved by more than ``POSITION_TOLERANCE`` of
+        ``match_radius``. A bid that drifts as the vehicle flies, or a track task that follows its target by
+        a metre, is not news: peers compare bids to decide who wins (Choi et al. Table 1) and match track
+        tasks within ``match_radius``, so they decide the same within those tolerances; the ``period``
+        refresh bounds how stale they get."""
+        sent = self._sent
+        if sent is None or self._disputed or sent.keys() != held.keys():
+            return True
+        reach = POSITION_TOLERANCE * self.config.match_radius
+        for key, (north, east, winner, bid) in held.items():
+            was_north, was_east, was_winner, was_bid = sent[key]
+            if (winner != was_winner or abs(bid - was_bid) > BID_TOLERANCE * abs(was_bid)
+                    or math.hypot(north - was_north, east - was_east) > reach):
+                return True
+        return False
 
     def _crowded(self) -> bool:
         """A peer within ``CROWD × min_separation``: the separation layer needs this agent's position every step."""
@@ -138,10 +164,14 @@ class AssignmentExchange:
 
     def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
                 t: float) -> list[tuple[str, str | None]]:
-        """Merge a peer's bids (Table 1); the merges are counted in :meth:`metrics`, not as fusions. Raises
-        :class:`agent.net.wire.DecodeError` on non-finite numbers or a
-        task key this fleet does not have, and then changes nothing."""
-        at, entries, stamps = payload["at"], payload["tasks"], payload["stamps"]
+        """Merge a peer's bids (Table 1), or note where it is when the message is its position alone; the merges
+        are counted in :meth:`metrics`, not as fusions. Raises :class:`agent.net.wire.DecodeError` on
+        non-finite numbers, a task key this fleet does not have, or timestamps without tasks (or tasks without
+        timestamps), and then changes nothing."""
+        at, entries, stamps = payload["at"], payload.get("tasks"), payload.get("stamps")
+        if (entries is None) != (stamps is None):
+            raise wire.DecodeError("bad_field", "a tasks message holds both stamps and tasks, or neither")
+        entries, stamps = entries or [], stamps or {}
         numbers = [*at, *stamps.values(), *(x for e in entries for x in (e[1], e[2], e[4]))]
         if not all(math.isfinite(x) for x in numbers):
             raise wire.DecodeError("non_finite", "NaN or inf in a tasks message")
@@ -149,12 +179,17 @@ class AssignmentExchange:
         unknown = [e[0] for e in entries if e[0] not in slots and e[0] not in self.cells]
         if unknown:
             raise wire.DecodeError("bad_field", f"unknown task keys {unknown[:3]}")
-        winners = {e[0]: (e[3], e[4]) for e in entries if e[0] not in slots}
-        winners.update(self._match_tracks([e for e in entries if e[0] in slots]))
         self.peers[origin] = np.array(at, float)
         self._peer_heard[origin] = t
+        if "tasks" not in payload:
+            self.cbba.heard(origin, t)
+            return []
+        winners = {e[0]: (e[3], e[4]) for e in entries if e[0] not in slots}
+        winners.update(self._match_tracks([e for e in entries if e[0] in slots]))
         self.merges += 1
         self.cbba.merge(origin, Bids(winners, stamps), t)
+        held = self.cbba.winners
+        self._disputed = self._disputed or any(held.get(key) != winner for key, (winner, _) in winners.items())
         return []  # bids are no belief: nothing to count among the fusions
 
     def _match_tracks(self, entries: list) -> dict[str, tuple[str, float]]:

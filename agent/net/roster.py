@@ -35,8 +35,8 @@ def _topology(payload: dict) -> Iterator[str]:
 
 def _tasks(payload: dict) -> Iterator[str]:
     """The vehicles with a CBBA timestamp, and each task's winner."""
-    yield from payload["stamps"]
-    yield from (winner for _, _, _, winner, _ in payload["tasks"])
+    yield from payload.get("stamps", ())
+    yield from (winner for _, _, _, winner, _ in payload.get("tasks", ()))
 
 
 def _grid(payload: dict) -> Iterator[str]:

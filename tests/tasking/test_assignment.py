@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.beliefs.assignment import AssignmentExchange, agreement
+from agent.beliefs.assignment import BID_TOLERANCE, POSITION_TOLERANCE, AssignmentExchange, agreement
 from agent.net import wire
 from agent.plugins import Views
 from agent.vehicles import vehicle_from_config
@@ -94,10 +94,71 @@ def test_bids_are_resent_only_when_changed_or_due():
     assert a.outgoing(1.0, []) is not None  # the heartbeat
 
 
+def _bids_sent(a, t):
+    """Whether ``a`` sends its bids at ``t`` (not nothing, not its position alone)."""
+    message = a.outgoing(t, [])
+    return message is not None and "tasks" in message.payload
+
+
+def test_a_bid_that_drifts_within_its_tolerance_is_not_news_and_one_beyond_it_is():
+    a = _exchange("a", (-50.0, 0.0), [(0, np.array([60.0, 0.0]))], period=10.0)
+    a.settle(0.0)
+    assert a.cbba.winners["track:0"] == "a" and _bids_sent(a, 0.0)
+    bid = a.cbba.bids["track:0"]
+    a.cbba.bids["track:0"] = bid * (1 + 0.8 * BID_TOLERANCE)  # the vehicle flew a little: a smaller drift
+    assert not _bids_sent(a, 0.2)
+    a.cbba.bids["track:0"] = bid * (1 + 1.2 * BID_TOLERANCE)
+    assert _bids_sent(a, 0.4)
+
+
+def test_a_track_task_is_news_once_it_moved_beyond_its_share_of_the_match_radius():
+    picture = [(0, np.array([60.0, 0.0]))]
+    a = _exchange("a", (-50.0, 0.0), picture, period=10.0)
+    a.settle(0.0)
+    assert _bids_sent(a, 0.0)
+    reach = POSITION_TOLERANCE * a.config.match_radius
+    for t, north in ((0.2, 60.0 + 0.9 * reach), (0.4, 60.0 + 1.1 * reach)):
+        picture[0] = (0, np.array([north, 0.0]))
+        a.settle(t)
+        a.cbba.bids["track:0"] = a._sent["track:0"][3]  # the bid as sent: only the position moves
+        assert _bids_sent(a, t) == (t == 0.4)
+
+
+def test_a_peer_that_names_another_winner_gets_the_bids_at_once():
+    # a holds the lone target; b, farther away, has not heard a and claims it in its first message
+    tracks = [(0, np.array([60.0, 0.0]))]
+    a, b = _exchange("a", (50.0, 0.0), tracks, period=10.0), _exchange("b", (-60.0, 0.0), tracks, period=10.0)
+    for x in (a, b):
+        x.settle(0.0)
+    assert _bids_sent(a, 0.0) and b.cbba.winners["track:0"] == "b"
+    assert not _bids_sent(a, 0.2)  # nothing new
+    claim = b.outgoing(0.2, []).payload
+    a.receive("b", 1, 0.2, claim, Edge.TREE, 0.2)
+    assert a.cbba.winners["track:0"] == "a"  # a out-bids b: b believes a wrong winner ...
+    assert _bids_sent(a, 0.4)  # ... and hears a's bids on the next step, not a period later
+    assert not _bids_sent(a, 0.6)
+
+
+def test_a_crowded_vehicle_sends_its_position_alone_and_the_peer_only_moves_it():
+    a, b = _exchange("a", (0.0, 0.0), [], period=10.0), _exchange("b", (0.0, 15.0), [], period=10.0)
+    _talk(a, b, 0.0)
+    assert a._crowded() and b._crowded()  # 15 m apart: within CROWD minimum separations
+    message = a.outgoing(0.2, [])
+    assert set(message.payload) == {"at"}
+    data = wire.encode(wire.Envelope(kind="tasks", origin="a", seq=2, stamp=0.2, payload=message.payload))
+    merges, winners = b.merges, dict(b.cbba.winners)
+    b.receive("a", 2, 0.2, wire.decode(data).payload, Edge.TREE, 0.4)
+    assert b.merges == merges and b.cbba.winners == winners  # no bids: nothing merged
+    assert b.cbba.stamps["a"] == 0.4 and b._peer_heard["a"] == 0.4  # but a was heard, and where it is
+
+
 @pytest.mark.parametrize("payload, reason", [
     ({"at": (0.0, math.nan), "stamps": {}, "tasks": []}, "non_finite"),  # a NaN position
     ({"at": (0.0, 0.0), "stamps": {"b": math.inf}, "tasks": []}, "non_finite"),  # an infinite timestamp
     ({"at": (0.0, 0.0), "stamps": {}, "tasks": [["search:9:9", 0.0, 0.0, "b", 1.0]]}, "bad_field"),  # no such cell
+    ({"at": (0.0, 0.0), "stamps": {"b": 0.0}}, "bad_field"),  # timestamps without the bids they stamp
+    ({"at": (0.0, 0.0), "tasks": [["search:0:0", -80.0, -80.0, "b", 1.0]]}, "bad_field"),  # bids, no timestamps
+    ({"at": (math.inf, 0.0)}, "non_finite"),  # a position alone, but not a finite one
 ])
 def test_a_bad_tasks_message_is_refused_and_changes_nothing(payload, reason):
     a = _exchange("a", (0.0, 0.0), [])
