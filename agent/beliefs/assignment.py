@@ -44,7 +44,8 @@ from tasking.sortie import Sortie
 from tasking.tasks import Capability, Task
 
 TRACK = "track"
-CROWD = 4.0  # peers closer than this many minimum separations get the position every step
+CROWD = 4.0  # peers closer than this many minimum separations get the position every step ...
+DEAD_RECKONING_TOLERANCE = 0.1  # ... in which it strays from its last one flown on by more than this × min_separation
 BID_TOLERANCE = 0.05  # a winning bid that moved by less than this share of itself is not news (chosen here)
 POSITION_TOLERANCE = 0.2  # a task that moved by less than this share of match_radius is not news (chosen here)
 
@@ -67,7 +68,9 @@ class AssignmentExchange:
         self.cbba = CBBA(me, config.capacity, config.stickiness)
         self.merges = 0
         self.tasks: dict[str, Task] = {}
-        self.peers: dict[str, np.ndarray] = {}  # peer -> its last reported position
+        self.peers: dict[str, np.ndarray] = {}  # peer -> its position (north, east) now, dead-reckoned at settle
+        self._motion: dict[str, tuple[float, np.ndarray, np.ndarray]] = {}  # peer -> (stamp, position, velocity)
+        self._told: tuple[float, np.ndarray, np.ndarray] | None = None  # the same of this vehicle, as last sent
         self._peer_heard: dict[str, float] = {}  # peer -> when its last bids arrived
         self.expired: list[tuple[float, str]] = []  # (t, vehicle) each time a silent vehicle's claims were released
         self._sent: dict | None = None  # task key -> (north, east, winner, bid) as last sent
@@ -95,6 +98,7 @@ class AssignmentExchange:
         reports its battery and failures has them stand in for the health model's fuel and failures."""
         self.tasks = fleet_tasks(self.views["track"].positions, self.searches, self.config)
         self._expire(t)
+        self.peers = {peer: _reckoned(motion, t) for peer, motion in self._motion.items()}
         position = self.vehicle.state().position[:2]
         serving = self.cbba.path[0] if self.cbba.path else None
         if self.sortie is None:
@@ -113,21 +117,33 @@ class AssignmentExchange:
         stops counting for the separation layer: no ghost holds a target or a patch of sky."""
         self.expired += [(t, k) for k in self.cbba.expire(t, self.config.peer_timeout)]
         for peer in [p for p, heard in self._peer_heard.items() if t - heard > self.config.peer_timeout]:
-            del self._peer_heard[peer], self.peers[peer]
+            del self._peer_heard[peer], self.peers[peer], self._motion[peer]
 
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
         """The bids, when a peer needs them (:meth:`_news`) and every ``period`` otherwise; between those,
-        the position alone every step while a peer is crowding this vehicle."""
+        the position and velocity alone while a peer is crowding this vehicle and the position its peers
+        dead-reckon from the last ones sent is off by more than ``DEAD_RECKONING_TOLERANCE × min_separation``
+        (the separation layer needs where it is; a vehicle on a straight leg needs no message for that)."""
         bids = self.cbba.message(t)
         held = {key: (*map(float, self.tasks[key].position), winner, bid)
                 for key, (winner, bid) in sorted(bids.winners.items()) if key in self.tasks}
-        position = self.vehicle.state().position
-        at = (float(position[0]), float(position[1]))
+        state = self.vehicle.state()
+        at, v = state.position[:2].astype(float), state.velocity[:2].astype(float)
+        motion = {"at": (float(at[0]), float(at[1])), "v": (float(v[0]), float(v[1]))}
         if not self._news(held) and t - self._sent_at < self.config.period:
-            return Outgoing({"at": at}) if self._crowded() else None
-        self._sent, self._sent_at, self._disputed = held, t, False
-        return Outgoing({"at": at, "stamps": dict(bids.stamps),
+            if not self._crowded() or not self._strayed(t, at):
+                return None
+            self._told = (t, at, v)
+            return Outgoing(motion)
+        self._sent, self._sent_at, self._disputed, self._told = held, t, False, (t, at, v)
+        return Outgoing({**motion, "stamps": dict(bids.stamps),
                          "tasks": [[_wire_key(key), *entry] for key, entry in held.items()]})
+
+    def _strayed(self, t: float, at: np.ndarray) -> bool:
+        """Whether this vehicle is farther than the dead-reckoning tolerance from where its peers reckon it."""
+        if self._told is None:
+            return True
+        return float(np.hypot(*(at - _reckoned(self._told, t)))) > DEAD_RECKONING_TOLERANCE * self.config.min_separation
 
     def _news(self, held: dict) -> bool:
         """Whether the bids hold news a peer needs, against what was last sent: a task or winner appeared,
@@ -168,11 +184,12 @@ class AssignmentExchange:
         are counted in :meth:`metrics`, not as fusions. Raises :class:`agent.net.wire.DecodeError` on
         non-finite numbers, a task key this fleet does not have, or timestamps without tasks (or tasks without
         timestamps), and then changes nothing."""
-        at, entries, stamps = payload["at"], payload.get("tasks"), payload.get("stamps")
+        at, v = payload["at"], payload.get("v", (0.0, 0.0))
+        entries, stamps = payload.get("tasks"), payload.get("stamps")
         if (entries is None) != (stamps is None):
             raise wire.DecodeError("bad_field", "a tasks message holds both stamps and tasks, or neither")
         entries, stamps = entries or [], stamps or {}
-        numbers = [*at, *stamps.values(), *(x for e in entries for x in (e[1], e[2], e[4]))]
+        numbers = [*at, *v, *stamps.values(), *(x for e in entries for x in (e[1], e[2], e[4]))]
         if not all(math.isfinite(x) for x in numbers):
             raise wire.DecodeError("non_finite", "NaN or inf in a tasks message")
         slots = self.slots
@@ -180,6 +197,7 @@ class AssignmentExchange:
         if unknown:
             raise wire.DecodeError("bad_field", f"unknown task keys {unknown[:3]}")
         self.peers[origin] = np.array(at, float)
+        self._motion[origin] = (stamp, self.peers[origin], np.array(v, float))
         self._peer_heard[origin] = t
         if "tasks" not in payload:
             self.cbba.heard(origin, t)
@@ -257,6 +275,12 @@ class AssignmentExchange:
                                "serving": dict(kinds),
                                "timeline": [[t, served] for t, served in self.timeline],
                                "evaluated_until": self.evaluated_until}}
+
+
+def _reckoned(motion: tuple[float, np.ndarray, np.ndarray], t: float) -> np.ndarray:
+    """Dead reckoning: where a vehicle last said it was at ``stamp``, flown on at its velocity until ``t``."""
+    stamp, at, v = motion
+    return at + v * (t - stamp)
 
 
 def _wire_key(key: str) -> str:

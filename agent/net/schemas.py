@@ -92,11 +92,13 @@ TaskBid = tuple[TaskKey, float, float, PeerName, float]
 
 class TasksPayload(TypedDict):
     """Kind ``tasks``: CBBA bids (:mod:`agent.beliefs.assignment`): the sender's (north, east), its timestamps
-    ``s_ik`` per vehicle, and per task the winner and winning bid it knows. Without ``stamps`` and ``tasks``
-    it is the sender's position only (bids unchanged, a crowding peer's separation layer needs where it is);
-    one of the two without the other is refused by the receiver."""
+    ``s_ik`` per vehicle, and per task the winner and winning bid it knows; ``v`` its velocity (north, east),
+    from which peers dead-reckon its position. Without ``stamps`` and ``tasks`` it is the sender's motion only
+    (bids unchanged, a crowding peer's separation layer needs where it is); one of the two without the other
+    is refused by the receiver."""
 
     at: tuple[float, float]
+    v: NotRequired[tuple[float, float]]
     stamps: NotRequired[Annotated[dict[PeerName, float], msgspec.Meta(max_length=MAX_PEERS)]]
     tasks: NotRequired[Annotated[list[TaskBid], msgspec.Meta(max_length=MAX_TASKS)]]
 

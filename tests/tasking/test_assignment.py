@@ -7,7 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from agent.beliefs.assignment import BID_TOLERANCE, POSITION_TOLERANCE, AssignmentExchange, agreement
+from agent.beliefs.assignment import (
+    BID_TOLERANCE,
+    DEAD_RECKONING_TOLERANCE,
+    POSITION_TOLERANCE,
+    AssignmentExchange,
+    agreement,
+)
 from agent.net import wire
 from agent.plugins import Views
 from agent.vehicles import vehicle_from_config
@@ -139,17 +145,27 @@ def test_a_peer_that_names_another_winner_gets_the_bids_at_once():
     assert not _bids_sent(a, 0.6)
 
 
-def test_a_crowded_vehicle_sends_its_position_alone_and_the_peer_only_moves_it():
+def test_a_crowded_vehicle_sends_its_motion_alone_once_it_strays_from_where_its_peers_reckon_it(monkeypatch):
     a, b = _exchange("a", (0.0, 0.0), [], period=10.0), _exchange("b", (0.0, 15.0), [], period=10.0)
-    _talk(a, b, 0.0)
+    _talk(a, b, 0.0)  # bids with a at rest
     assert a._crowded() and b._crowded()  # 15 m apart: within CROWD minimum separations
-    message = a.outgoing(0.2, [])
-    assert set(message.payload) == {"at"}
-    data = wire.encode(wire.Envelope(kind="tasks", origin="a", seq=2, stamp=0.2, payload=message.payload))
+    assert a.outgoing(0.2, []) is None  # at rest, where b reckons it: nothing to say
+    reach = DEAD_RECKONING_TOLERANCE * a.config.min_separation
+    monkeypatch.setattr(a.vehicle, "state", lambda: _State([0.9 * reach, 0.0, -80.0], [5.0, 0.0, 0.0]))
+    assert a.outgoing(0.4, []) is None  # it moved, but less than the tolerance
+    monkeypatch.setattr(a.vehicle, "state", lambda: _State([1.1 * reach, 0.0, -80.0], [5.0, 0.0, 0.0]))
+    message = a.outgoing(0.6, [])
+    assert set(message.payload) == {"at", "v"}
+    data = wire.encode(wire.Envelope(kind="tasks", origin="a", seq=2, stamp=0.6, payload=message.payload))
     merges, winners = b.merges, dict(b.cbba.winners)
-    b.receive("a", 2, 0.2, wire.decode(data).payload, Edge.TREE, 0.4)
+    b.receive("a", 2, 0.6, wire.decode(data).payload, Edge.TREE, 0.8)
     assert b.merges == merges and b.cbba.winners == winners  # no bids: nothing merged
-    assert b.cbba.stamps["a"] == 0.4 and b._peer_heard["a"] == 0.4  # but a was heard, and where it is
+    assert b.cbba.stamps["a"] == 0.8 and b._peer_heard["a"] == 0.8  # but a was heard
+    b.settle(1.0)
+    assert b.peers["a"] == pytest.approx([1.1 * reach + 5.0 * 0.4, 0.0])  # and flown on at its velocity
+    # flying on at that velocity, a stays where b reckons it: nothing more to say
+    monkeypatch.setattr(a.vehicle, "state", lambda: _State([1.1 * reach + 5.0 * 0.4, 0.0, -80.0], [5.0, 0.0, 0.0]))
+    assert a.outgoing(1.0, []) is None
 
 
 @pytest.mark.parametrize("payload, reason", [
@@ -159,6 +175,7 @@ def test_a_crowded_vehicle_sends_its_position_alone_and_the_peer_only_moves_it()
     ({"at": (0.0, 0.0), "stamps": {"b": 0.0}}, "bad_field"),  # timestamps without the bids they stamp
     ({"at": (0.0, 0.0), "tasks": [["search:0:0", -80.0, -80.0, "b", 1.0]]}, "bad_field"),  # bids, no timestamps
     ({"at": (math.inf, 0.0)}, "non_finite"),  # a position alone, but not a finite one
+    ({"at": (0.0, 0.0), "v": (0.0, math.nan)}, "non_finite"),  # a velocity to dead-reckon from that is NaN
 ])
 def test_a_bad_tasks_message_is_refused_and_changes_nothing(payload, reason):
     a = _exchange("a", (0.0, 0.0), [])
