@@ -8,9 +8,10 @@ Built when ``[tasking] planner = "assignment"``. Every step, after the other bel
    thesis 000's petal value (4.1) with the range test of the health extension (§2.7.4);
 3. **bids** out (kind ``tasks``): per task the winner and bid this agent knows, with its timestamps and its
    own position — when a peer needs them (a winner changed or is disputed, a bid moved by more than
-   ``BID_TOLERANCE``, a track task by more than ``POSITION_TOLERANCE`` of ``match_radius``), every ``period``
-   otherwise, and every step while a peer is within ``CROWD`` minimum separations (the separation layer of
-   the planner needs fresh positions);
+   ``BID_TOLERANCE``, a track task by more than ``POSITION_TOLERANCE`` of ``match_radius``) and every
+   ``period``; peers dead-reckon the sender from its position and velocity, and while a peer is within
+   ``CROWD`` minimum separations (the planner's separation layer needs where it is) the sender's motion goes
+   alone whenever it strays from that reckoning by more than ``DEAD_RECKONING_TOLERANCE`` of the separation;
 4. **consensus** on receipt (:meth:`tasking.cbba.CBBA.merge`, Table 1 of Choi et al.).
 
 Task identity across agents: a search cell has the same key everywhere (``search:r:c``); a track is known
@@ -71,7 +72,7 @@ class AssignmentExchange:
         self.peers: dict[str, np.ndarray] = {}  # peer -> its position (north, east) now, dead-reckoned at settle
         self._motion: dict[str, tuple[float, np.ndarray, np.ndarray]] = {}  # peer -> (stamp, position, velocity)
         self._told: tuple[float, np.ndarray, np.ndarray] | None = None  # the same of this vehicle, as last sent
-        self._peer_heard: dict[str, float] = {}  # peer -> when its last bids arrived
+        self._peer_heard: dict[str, float] = {}  # peer -> when its last message (bids or motion) arrived
         self.expired: list[tuple[float, str]] = []  # (t, vehicle) each time a silent vehicle's claims were released
         self._sent: dict | None = None  # task key -> (north, east, winner, bid) as last sent
         self._sent_at = -math.inf
@@ -165,7 +166,7 @@ class AssignmentExchange:
         return False
 
     def _crowded(self) -> bool:
-        """A peer within ``CROWD × min_separation``: the separation layer needs this agent's position every step."""
+        """A peer within ``CROWD × min_separation``: the separation layer needs to know where this agent is."""
         if not self.peers or self.config.min_separation <= 0:
             return False
         own = self.vehicle.state().position[:2]
