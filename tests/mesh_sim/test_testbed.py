@@ -105,7 +105,7 @@ def test_three_hosts_run_the_default_scenario_with_a_link_down_and_leave_nothing
     assert [e["at_sim_s"] for e in report["link_events"]] == [pytest.approx(4.0, abs=0.5), pytest.approx(8.0, abs=0.5)]
     assert set(report["bytes"]) == {"uav0", "uav1", "uav2"}
     connected = {name: check["payload_ratio"] for name, check in report["bytes"].items() if name != "uav1"}
-    assert all(1.0 <= r <= 1.5 for r in connected.values()), report["bytes"]
+    assert all(1.0 <= r <= 1.5 for r in connected.values()), (connected, report["bytes"])
     assert report["bytes"]["uav1"]["payload_ratio"] < min(connected.values()), "what uav1 sent while cut off stayed"
     assert made and _ours(made[0]) == 0
     assert_all_gone(outcome.pids.values())
