@@ -45,8 +45,8 @@ from tasking.sortie import Sortie
 from tasking.tasks import Capability, Task
 
 TRACK = "track"
-CROWD = 4.0  # peers closer than this many minimum separations get the position every step ...
-DEAD_RECKONING_TOLERANCE = 0.1  # ... in which it strays from its last one flown on by more than this × min_separation
+CROWD = 4.0  # peers closer than this many minimum separations get the motion alone whenever it strays ...
+DEAD_RECKONING_TOLERANCE = 0.1  # ... from the last one sent, flown on, by more than this × min_separation
 BID_TOLERANCE = 0.05  # a winning bid that moved by less than this share of itself is not news (chosen here)
 POSITION_TOLERANCE = 0.2  # a task that moved by less than this share of match_radius is not news (chosen here)
 
@@ -118,7 +118,7 @@ class AssignmentExchange:
         stops counting for the separation layer: no ghost holds a target or a patch of sky."""
         self.expired += [(t, k) for k in self.cbba.expire(t, self.config.peer_timeout)]
         for peer in [p for p, heard in self._peer_heard.items() if t - heard > self.config.peer_timeout]:
-            del self._peer_heard[peer], self.peers[peer], self._motion[peer]
+            del self._peer_heard[peer], self._motion[peer]  # settle reckons the peers from what is left
 
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
         """The bids, when a peer needs them (:meth:`_news`) and every ``period`` otherwise; between those,
@@ -132,7 +132,7 @@ class AssignmentExchange:
         at, v = state.position[:2].astype(float), state.velocity[:2].astype(float)
         motion = {"at": (float(at[0]), float(at[1])), "v": (float(v[0]), float(v[1]))}
         if not self._news(held) and t - self._sent_at < self.config.period:
-            if not self._crowded() or not self._strayed(t, at):
+            if not self._strayed(t, at) or not self._crowded(at):
                 return None
             self._told = (t, at, v)
             return Outgoing(motion)
@@ -141,9 +141,8 @@ class AssignmentExchange:
                          "tasks": [[_wire_key(key), *entry] for key, entry in held.items()]})
 
     def _strayed(self, t: float, at: np.ndarray) -> bool:
-        """Whether this vehicle is farther than the dead-reckoning tolerance from where its peers reckon it."""
-        if self._told is None:
-            return True
+        """Whether this vehicle is farther than the dead-reckoning tolerance from where its peers reckon it (asked
+        only once bids went out, and with them ``_told``)."""
         return float(np.hypot(*(at - _reckoned(self._told, t)))) > DEAD_RECKONING_TOLERANCE * self.config.min_separation
 
     def _news(self, held: dict) -> bool:
@@ -165,11 +164,11 @@ class AssignmentExchange:
                 return True
         return False
 
-    def _crowded(self) -> bool:
-        """A peer within ``CROWD × min_separation``: the separation layer needs to know where this agent is."""
+    def _crowded(self, own: np.ndarray) -> bool:
+        """A peer within ``CROWD × min_separation`` of ``own`` (north, east): the separation layer needs to know
+        where this agent is."""
         if not self.peers or self.config.min_separation <= 0:
             return False
-        own = self.vehicle.state().position[:2]
         nearest = min(float(np.hypot(*(p - own))) for p in self.peers.values())
         return nearest < CROWD * self.config.min_separation
 
@@ -177,7 +176,7 @@ class AssignmentExchange:
         return None
 
     def thinned(self, message: Outgoing) -> None:
-        self._sent = None  # not sent: offer it again next step
+        self._sent = None  # not sent: the bids go again next step
 
     def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
                 t: float) -> list[tuple[str, str | None]]:
@@ -188,7 +187,8 @@ class AssignmentExchange:
         at, v = payload["at"], payload.get("v", (0.0, 0.0))
         entries, stamps = payload.get("tasks"), payload.get("stamps")
         if (entries is None) != (stamps is None):
-            raise wire.DecodeError("bad_field", "a tasks message holds both stamps and tasks, or neither")
+            raise wire.DecodeError("bad_field", "stamps without tasks, or tasks without stamps: a tasks message "
+                                                "holds both, or neither (the sender's motion alone)")
         entries, stamps = entries or [], stamps or {}
         numbers = [*at, *v, *stamps.values(), *(x for e in entries for x in (e[1], e[2], e[4]))]
         if not all(math.isfinite(x) for x in numbers):

@@ -148,7 +148,8 @@ def test_a_peer_that_names_another_winner_gets_the_bids_at_once():
 def test_a_crowded_vehicle_sends_its_motion_alone_once_it_strays_from_where_its_peers_reckon_it(monkeypatch):
     a, b = _exchange("a", (0.0, 0.0), [], period=10.0), _exchange("b", (0.0, 15.0), [], period=10.0)
     _talk(a, b, 0.0)  # bids with a at rest
-    assert a._crowded() and b._crowded()  # 15 m apart: within CROWD minimum separations
+    where = {x: x.vehicle.state().position[:2] for x in (a, b)}
+    assert a._crowded(where[a]) and b._crowded(where[b])  # 15 m apart: within CROWD minimum separations
     assert a.outgoing(0.2, []) is None  # at rest, where b reckons it: nothing to say
     reach = DEAD_RECKONING_TOLERANCE * a.config.min_separation
     monkeypatch.setattr(a.vehicle, "state", lambda: _State([0.9 * reach, 0.0, -80.0], [5.0, 0.0, 0.0]))
