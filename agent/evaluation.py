@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fusion.gaussian import Gaussian
+from fusion.trajectory import grid_epoch
 
 MATCH_GATE = 16.27  # chi-square(3) 99.9 %; chosen here
 TAIL_S = 10.0  # s: the final part of a run that is also summarised on its own; chosen here
@@ -64,7 +65,7 @@ class TrackEvaluator:
             score.squared_errors += squared_error
             score.nees += nees
             score.count += 1
-            sums = score.bins.setdefault(int(np.floor(t / BIN_S + 1e-9)), [0.0, 0.0, 0, 0.0])
+            sums = score.bins.setdefault(grid_epoch(t, BIN_S), [0.0, 0.0, 0, 0.0])
             sums[0] += squared_error
             sums[1] += nees
             sums[2] += 1
