@@ -113,7 +113,7 @@ def independent_samples(target_lists: list[list[dict]], t0: float, t1: float) ->
 def independent_count(tracked_seconds: Iterable[float]) -> int:
     """One independent NEES sample per :data:`DECORRELATION_S` of each target's tracked seconds, at least one per
     tracked target: the rule shared by the phases and ``skymesh bench rumor`` (:mod:`mesh_sim.bench.rumor_stats`)."""
-    return sum(max(1, int(s // DECORRELATION_S + 1e-9)) for s in tracked_seconds if s > 0)
+    return sum(max(1, int(s // DECORRELATION_S)) for s in tracked_seconds if s > 0)
 
 
 def _rmse(sums: np.ndarray) -> float | None:

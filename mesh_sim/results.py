@@ -24,7 +24,6 @@ from rich.table import Table
 
 from agent.runtime import write_json
 from mesh_sim.phases import anees_interval, caption, independent_samples, ratio_of, run_phases
-from mesh_sim.plots import draw_run_plots
 
 
 def pooled(targets: list[dict]) -> tuple[float | None, float | None]:
@@ -104,8 +103,8 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
             "anees": anees,
             "tail_rmse": tail_rmse,
             "tail_anees": tail_anees,
-            "rmse_ratio_to_oracle": rmse / oracle_rmse if rmse is not None and oracle_rmse else None,
-            "rmse_ratio_to_in_flight": rmse / in_flight_rmse if rmse is not None and in_flight_rmse else None,
+            "rmse_ratio_to_oracle": ratio_of(rmse, oracle_rmse),
+            "rmse_ratio_to_in_flight": ratio_of(rmse, in_flight_rmse),
             "bytes_per_agent_per_s": float(np.mean(tx)) / sc.duration if tx else None,
             "targets_tracked_by_every_agent": _tracked_by_all(agents, scenario),
             "exact_share": _exact_share(agents),
@@ -118,6 +117,8 @@ def collect(run_dir: Path, scenario, status: str, speed: float) -> dict:
         metrics["fleet"]["grid"] = grid_fleet(agents, oracle["grid"], sc)
     write_json(run_dir / "metrics.json", metrics)
     try:
+        from mesh_sim.plots import draw_run_plots  # matplotlib only when a run is collected, not on import
+
         draw_run_plots(metrics, run_dir)
     except (OSError, ValueError) as err:  # a plot is a convenience; the metrics are already written
         Console(stderr=True).print(f"[yellow]plots skipped: {err}")
