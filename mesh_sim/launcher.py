@@ -180,6 +180,21 @@ def run_folder(base: Path, name: str) -> Iterator[Path]:
         raise
 
 
+def stop_processes(processes: list[subprocess.Popen]) -> None:
+    """SIGTERM every process still running (by PID), wait up to ``GRACE_S`` for all of them, then SIGKILL the
+    stragglers (by PID)."""
+    for proc in processes:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+    deadline = time.time() + GRACE_S
+    for proc in processes:
+        try:
+            proc.wait(timeout=max(0.1, deadline - time.time()))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 class Launcher:
     def __init__(self, scenario: Scenario, run_dir: Path, speed: float = 1.0, rerun: str = "save",
                  console: Console | None = None, extra_env: dict | None = None, cameras: dict | None = None,
@@ -377,13 +392,4 @@ class Launcher:
 
     def _stop_all(self) -> None:
         """SIGTERM every child still running (by PID), wait, then SIGKILL the stragglers (by PID)."""
-        for child in self.children:
-            if child.process.poll() is None:
-                child.process.send_signal(signal.SIGTERM)
-        deadline = time.time() + GRACE_S
-        for child in self.children:
-            try:
-                child.process.wait(timeout=max(0.1, deadline - time.time()))
-            except subprocess.TimeoutExpired:
-                child.process.kill()
-                child.process.wait()
+        stop_processes([child.process for child in self.children])

@@ -24,7 +24,6 @@ lack ``netem``; delay and loss stay the emulated radio's.)
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import threading
@@ -32,15 +31,14 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent.net.zenoh_transport import SessionError
+from agent.net.zenoh_transport import KEEP_ALIVE, SessionError
 from agent.runtime import write_json
 from mesh_sim import netns
-from mesh_sim.launcher import GRACE_S, Launcher, RunOutcome, _sigterm_raises, _Terminated
+from mesh_sim.launcher import Launcher, RunOutcome, _sigterm_raises, _Terminated, stop_processes
 
 ROUTER_PORT = 7447  # Zenoh's default, in every namespace: each host has its own port space
 ROUTER_READY_S = 60.0  # wall seconds for a host's router to listen (python and zenoh imports on a loaded machine)
 LEASE_MS = 3000  # Zenoh lease between routers: a link that is down is noticed within 3 s (default 10 s); chosen
-KEEP_ALIVE = 4  # keep-alives per lease (Zenoh's default)
 GROUND = "ground"
 FRAME_HEADER = 14 + 20 + 32  # bytes: Ethernet, IPv4 and TCP with the timestamp option (Linux's default)
 TESTBED_FILE = "testbed.json"
@@ -117,16 +115,7 @@ class Routers:
             time.sleep(0.05)
 
     def close(self) -> None:
-        for proc in self.processes:
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGTERM)
-        deadline = time.time() + GRACE_S
-        for proc in self.processes:
-            try:
-                proc.wait(timeout=max(0.1, deadline - time.time()))
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        stop_processes(self.processes)
 
 
 class LinkEvents(threading.Thread):
@@ -226,9 +215,11 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
             finally:
                 if bed.events is not None:
                     bed.events.stop.set()
+                    bed.events.join()  # no link taken up while the namespaces go, nor an event recorded late
             counters = {name: net.counters(name) for name in net.hosts}
     except _Terminated:  # outside the run itself (which reports its own): there are no results
-        raise OSError("terminated while the test bed was being set up; everything made is removed") from None
+        raise OSError("terminated while the test bed was being set up or torn down; everything made is "
+                      "removed") from None
     sent = {name: {k: v - bed.at_epoch.get(name, {}).get(k, 0) for k, v in counters[name].items()}
             for name in names}
     agents = {a["id"]: a for a in outcome.metrics.get("agents", [])}

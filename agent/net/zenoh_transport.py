@@ -35,6 +35,7 @@ from agent.net.keys import Incoming, Keys
 from agent.net.wire import ZENOH_ENCODING
 
 QUEUE_LIMIT = 10_000  # samples per subscription; chosen here (40 agents at 5 Hz send an agent ~300 per second)
+KEEP_ALIVE = 4  # keep-alives per lease (Zenoh's default), when a lease is set
 
 
 def client_config(connect: list[str], lease_ms: int | None = None) -> zenoh.Config:
@@ -45,7 +46,7 @@ def client_config(connect: list[str], lease_ms: int | None = None) -> zenoh.Conf
     c.insert_json5("connect/endpoints", json.dumps(list(connect)))
     if lease_ms is not None:
         c.insert_json5("transport/link/tx/lease", json.dumps(lease_ms))
-        c.insert_json5("transport/link/tx/keep_alive", json.dumps(4))
+        c.insert_json5("transport/link/tx/keep_alive", json.dumps(KEEP_ALIVE))
     return c
 
 
