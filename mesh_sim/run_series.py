@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from agent.evaluation import BIN_S
-from mesh_sim.phases import DIM, anees_interval, independent_samples
+from mesh_sim.phases import DIM, anees_interval, independent_count
 
 
 def error_series(target: dict) -> np.ndarray:
@@ -30,16 +30,21 @@ def error_series(target: dict) -> np.ndarray:
 
 
 def nees_series(target_lists: list[list[dict]]) -> np.ndarray:
-    """``[[t, anees, low, high], ...]`` per bin with samples, pooled over every list of per-target scores."""
+    """``[[t, anees, low, high], ...]`` per bin with samples, pooled over every list of per-target scores. A bin is
+    shorter than the decorrelation time, so its independent samples are its tracked targets, one each
+    (:func:`mesh_sim.phases.independent_samples` over one bin, counted in the same pass)."""
     sums: dict[float, np.ndarray] = {}
+    tracked: dict[float, set[str]] = {}
     for targets in target_lists:
         for target in targets:
             for start, *bin_sums in target.get("bins", []):
                 sums[start] = sums.get(start, np.zeros(2)) + (bin_sums[1], bin_sums[2])
+                if bin_sums[2]:
+                    tracked.setdefault(start, set()).add(target["target"])
     rows = []
     for start, (nees, n) in sorted(sums.items()):
         if n:
-            lo, hi = anees_interval(independent_samples(target_lists, start, start + BIN_S))
+            lo, hi = anees_interval(independent_count([BIN_S] * len(tracked[start])))
             rows.append([start + BIN_S / 2, nees / (DIM * n), lo, hi])
     return np.array(rows, float).reshape(-1, 4)
 
