@@ -17,7 +17,8 @@
   a bad ``--duration``, ``--loss``, ... names the flag (``mesh_sim.run_overrides``);
 * ``skymesh testbed [the options of run] [--link-down T:uavK[:T_UP] ...] [--tbf-rate BYTES_PER_S]`` — the run
   across hosts on this machine: a Linux network namespace and a Zenoh router per agent (``mesh_sim.testbed``;
-  root); a link taken down and up mid-run, the kernel's rate cap on every UAV host; ``testbed.json`` in the run folder;
+  root; not with ``--lockstep``, ``--zenoh-config`` or ``--vehicle mavlink``); a link taken down and up mid-run,
+  the kernel's rate cap on every UAV host; ``testbed.json`` in the run folder;
 * ``skymesh demo`` — ``skymesh run`` on the default scenario (what ``make demo`` runs);
 * ``skymesh view --fleet NAME --connect ENDPOINT`` — the ground station (``mesh_sim.observer``), with this
   environment's Rerun viewer (``mesh_sim.viewer``) unless ``--save``, ``--connect-viewer`` or ``--web`` is given;

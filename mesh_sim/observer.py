@@ -22,7 +22,7 @@ What is logged, on the ``sim_time`` timeline (a duration, from each envelope's s
     maps/<id>                      Image         the agent's fire map (cell probability), north up
     maps/truth                     Image         the true fire: unburnt / burning / burnt cells
     maps/legend                    TextDocument  what the maps' colours mean
-    metrics/tracks/<id>            Scalars       number of tracks the agent reports
+    metrics/tracks/<id>            Scalars       number of tracks the agent reports, from its first report of one
     metrics/bytes_rx/<id>          Scalars       the agent's own received-bytes count, if its telemetry has one
     metrics/video_quality/<id>     Scalars       the camera's video-quality measure D(t), if its telemetry has one
     metrics/bytes_seen/<id>        Scalars       bytes the observer has received from the agent (all kinds)
@@ -68,7 +68,7 @@ from agent.net.fleet_key import read_key_file
 from agent.net.keys import Incoming, Keys
 from agent.net.zenoh_transport import ZenohTransport, load_config
 from agent.runtime import usage_error
-from mesh_sim.observer_blueprint import LIVE_METRICS, MAPS_LEGEND, fleet_blueprint
+from mesh_sim.observer_blueprint import LIVE_METRICS, MAPS_LEGEND, PALETTE, fleet_blueprint
 from mesh_sim.observer_geometry import RAY_LENGTH, cov_to_ellipsoid, nearest_truth, ray_end
 from mesh_sim.observer_grids import LEGEND, GridImages
 from mesh_sim.observer_messages import parse_telemetry, parse_truth
@@ -85,8 +85,6 @@ POLL_S = 0.05  # s between queue drains in the process loop
 GREEN = (40, 200, 60)
 ORANGE = (255, 150, 0)
 TRUTH_COLOUR = (230, 40, 40)
-PALETTE = [(31, 119, 180), (148, 103, 189), (23, 190, 207), (188, 189, 34), (227, 119, 194), (140, 86, 75),
-           (127, 127, 127), (44, 160, 44), (255, 187, 120), (174, 199, 232)]
 
 
 # -- the observer ------------------------------------------------------------------------------------
@@ -115,6 +113,7 @@ class Observer:
         self._reports: dict[str, tuple[float, set[str]]] = {}  # agent -> (stamp, neighbours it reports)
         self._truth: tuple[list[str], np.ndarray] = ([], np.zeros((0, 3)))  # the latest true targets
         self._series: set[str] = set()  # metric entities whose line is named and coloured
+        self._live: set[str] = set()  # the LIVE_METRICS with a line, kept as lines are named (not per message)
         self._layout: tuple = ()  # what the last blueprint was made for: (agents, metrics, maps)
         self._maps = False  # whether a fire map was logged
         self.grids = GridImages()
@@ -232,12 +231,13 @@ class Observer:
         path = f"metrics/{metric}/{agent}"
         if path not in self._series:
             self._series.add(path)
+            self._live.update(m for m in LIVE_METRICS if path.startswith(f"metrics/{m}/"))
             self.rec.log(path, rr.SeriesLines(colors=[self._colour(agent)], names=[agent]), static=True)
         self.rec.log(path, rr.Scalars(value))
 
     def _update_layout(self) -> None:
         """Send the blueprint again if the fleet, its metrics or its maps grew since the last one."""
-        metrics = [m for m in LIVE_METRICS if any(p.startswith(f"metrics/{m}/") for p in self._series)]
+        metrics = [m for m in LIVE_METRICS if m in self._live]
         layout = (tuple(self._colours), tuple(metrics), self._maps)
         if layout != self._layout:
             if self._maps and not (self._layout and self._layout[2]):

@@ -24,6 +24,9 @@ import rerun.blueprint as rrb
 LIVE_METRICS = {"tracks": "tracks held", "bytes_seen": "bytes seen by the ground station",
                 "bytes_rx": "bytes received", "video_quality": "video quality D(t)"}
 MAPS_LEGEND = "maps/legend"
+PALETTE = [(31, 119, 180), (148, 103, 189), (23, 190, 207), (188, 189, 34), (227, 119, 194), (140, 86, 75),
+           (127, 127, 127), (44, 160, 44), (255, 187, 120), (174, 199, 232)]  # the agents' lines and points, in turn
+ORACLE_COLOUR = (0, 0, 0)  # the centralized filter's lines
 
 
 def fleet_blueprint(agents: list[str], metrics: list[str], maps: bool, series: dict[str, list[str]] | None = None

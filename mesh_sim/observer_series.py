@@ -1,7 +1,8 @@
 """After a run: the recording gets the run's series, is compacted and carries its final layout.
 
 The series are those of the run's plots (:mod:`mesh_sim.run_series`), logged as Rerun scalars on the ``sim_time``
-timeline at each 1 s bin's middle, one line per agent named and coloured like its live metrics::
+timeline at each 1 s bin's middle, one line per agent named after it and coloured by its place in the fleet (its
+live metrics take their colours in the order the agents were first heard: the same unless one started late)::
 
     series/error/<target>/<who>             Scalars  position RMSE of the bin (who: an agent or "oracle")
     series/error/<target>/<who>/two_sigma   Scalars  2 sqrt(mean trace(P_pos)): the estimator's own 2-sigma
@@ -26,11 +27,9 @@ import numpy as np
 import rerun as rr
 from rerun.chunk import OptimizationProfile, RrdReader
 
-from mesh_sim.observer import PALETTE
-from mesh_sim.observer_blueprint import LIVE_METRICS, fleet_blueprint
+from mesh_sim.observer_blueprint import LIVE_METRICS, ORACLE_COLOUR, PALETTE, fleet_blueprint
 from mesh_sim.run_series import error_series, nees_series, traffic_series
 
-ORACLE_COLOUR = (0, 0, 0)
 FLEET_COLOUR = (214, 39, 40)
 BAND_COLOUR = (160, 160, 160)
 

@@ -44,7 +44,8 @@ def _grid(payload: dict) -> Iterator[str]:
     return iter(payload.get("acks", {}))
 
 
-#: kind -> the agent names inside its (schema-validated) payload; kinds absent here name no agent
+#: kind -> the agent names inside its (schema-validated) payload that are checked; kinds absent here carry none
+#: (the world's truth names the UAVs it simulates: that is the world's word, not a peer's)
 NAMES: dict[str, Callable[[dict], Iterable[str]]] = {
     "track": _track,
     "topology": _topology,

@@ -22,7 +22,8 @@ Arrays travel as MessagePack ExtType ``EXT_NDARRAY`` whose data is::
 
 Decoding is done in C by msgspec against typed schemas: the envelope is the :class:`_Body` struct (every
 header field's type and range declared), the payload is decoded by its kind's schema
-(:data:`agent.net.schemas.PAYLOADS`), so no Python code walks the elements of a message; a generic payload
+(:data:`agent.net.schemas.PAYLOADS`), so no Python code walks the elements of a message (but for the names a
+payload carries, which :mod:`agent.net.roster` checks against the fleet when ``fleet`` is given); a generic payload
 is unpacked in C by msgpack with every list and map bounded (:data:`MAX_GENERIC_ITEMS`). An array is
 checked once, as a whole, when msgspec meets it: the declared shape against the byte count and
 MAX_ARRAY_ELEMENTS *before* it is created; the result is a writable copy, never a view of the received

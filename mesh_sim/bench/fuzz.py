@@ -68,7 +68,8 @@ class AgentTarget:
         self._by_reference = {**copyreg.dispatch_table, **{type(part): _reference for part in opaque}}
 
     def decode(self, inp: Input) -> None:
-        """The decoder alone, as the agent calls it."""
+        """The decoder alone, with the agent's origin, key and kinds (not its fleet roster nor the Zenoh encoding,
+        which the agent checks around it: :meth:`receive` goes through those)."""
         origin = None if self.case.spec.kind == "truth" else inp.key.rsplit("/", 1)[-1]
         wire.decode(inp.data, expected_origin=origin, key=self.case.fleet_key, kinds=self.agent.kinds)
 

@@ -11,8 +11,8 @@ from pathlib import Path
 
 from mesh_sim.plots import errors, fire_maps, links, nees, rmse_bars, track_map, traffic
 
-#: The plot kinds every tracking run draws, in order.
-TRACKING_PLOTS = (rmse_bars, errors, nees, track_map, traffic, links)
+#: The plot kinds every run draws when it has their data, in order (a fire run: the map, traffic and links).
+RUN_PLOTS = (rmse_bars, errors, nees, track_map, traffic, links)
 
 
 def draw_run_plots(metrics: dict, run_dir: Path) -> list[Path]:
@@ -21,6 +21,6 @@ def draw_run_plots(metrics: dict, run_dir: Path) -> list[Path]:
     written."""
     folder = run_dir / "plots"
     folder.mkdir(exist_ok=True)
-    written = [m.draw(metrics, folder) for m in TRACKING_PLOTS]
+    written = [m.draw(metrics, folder) for m in RUN_PLOTS]
     written.append(fire_maps.draw(run_dir / "fire_maps.npz", folder))
     return [path for path in written if path is not None]
