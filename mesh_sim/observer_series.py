@@ -28,7 +28,7 @@ import rerun as rr
 from rerun.chunk import OptimizationProfile, RrdReader
 
 from mesh_sim.observer_blueprint import LIVE_METRICS, ORACLE_COLOUR, PALETTE, fleet_blueprint
-from mesh_sim.run_series import error_series, nees_series, traffic_series
+from mesh_sim.run_series import error_series, nees_series, scored, traffic_series
 
 FLEET_COLOUR = (214, 39, 40)
 BAND_COLOUR = (160, 160, 160)
@@ -62,11 +62,10 @@ def log_series(rec: rr.RecordingStream, metrics: dict) -> dict[str, list[str]]:
     """Log the run's series (module docstring); returns the panels they make, ``{kind: [sub-path, ...]}``."""
     colours = {a["id"]: PALETTE[k % len(PALETTE)] for k, a in enumerate(metrics["agents"])}
     colours["oracle"] = ORACLE_COLOUR
-    scored = {a["id"]: a.get("targets", []) for a in metrics["agents"]}
-    scored["oracle"] = metrics["oracle"].get("targets", [])
     panels: dict[str, list[str]] = {}
-    for who, targets in scored.items():
-        for target in targets:
+    by_who = scored(metrics)
+    for who, by_target in by_who.items():
+        for target in by_target.values():
             series = error_series(target)
             if len(series):
                 base = f"series/error/{target['target']}/{who}"
@@ -75,8 +74,8 @@ def log_series(rec: rr.RecordingStream, metrics: dict) -> dict[str, list[str]]:
                 panels.setdefault("error", []).append(target["target"])
     fleet = nees_series([a.get("targets", []) for a in metrics["agents"]])
     if len(fleet):
-        for who, targets in scored.items():
-            series = nees_series([targets])
+        for who, by_target in by_who.items():
+            series = nees_series([list(by_target.values())])
             if len(series):
                 _line(rec, f"series/anees/{who}", who, colours[who], series[:, 0], series[:, 1])
         _line(rec, "series/anees/fleet", "fleet", FLEET_COLOUR, fleet[:, 0], fleet[:, 1])

@@ -21,6 +21,13 @@ from agent.evaluation import BIN_S
 from mesh_sim.phases import DIM, anees_interval, independent_count
 
 
+def scored(metrics: dict) -> dict[str, dict[str, dict]]:
+    """``{who: {target: score}}``: each agent's per-target scores, then the oracle's (``"oracle"``, last)."""
+    out = {a["id"]: {t["target"]: t for t in a.get("targets", [])} for a in metrics["agents"]}
+    out["oracle"] = {t["target"]: t for t in metrics["oracle"].get("targets", [])}
+    return out
+
+
 def error_series(target: dict) -> np.ndarray:
     """``[[t, rmse, sigma], ...]`` of one per-target score (``bins`` of :class:`agent.evaluation.TrackEvaluator`)
     at each bin's middle; ``sigma`` is NaN for bins written before the evaluator kept ``trace(P_pos)``."""

@@ -11,21 +11,20 @@ import math
 from pathlib import Path
 
 from mesh_sim.plots.figure import ORACLE_COLOUR, agent_colour, figure, plain_log_scale, save
-from mesh_sim.run_series import error_series
+from mesh_sim.run_series import error_series, scored
 
 
 def draw(metrics: dict, folder: Path) -> Path | None:
     """One panel per target (``None`` when no target was scored)."""
-    scored = {a["id"]: {t["target"]: t for t in a.get("targets", [])} for a in metrics["agents"]}
-    scored["oracle"] = {t["target"]: t for t in metrics["oracle"].get("targets", [])}
-    targets = sorted({name for by_target in scored.values() for name in by_target})
+    by_who = scored(metrics)
+    targets = sorted({name for by_target in by_who.values() for name in by_target})
     if not targets:
         return None
     cols = min(2, len(targets))
     rows = math.ceil(len(targets) / cols)
     fig, axes = figure(rows, cols, width=6 * cols, height=3.2 * rows, sharex=True)
     for ax, name in zip(axes.flat, targets, strict=False):
-        for k, (who, by_target) in enumerate(scored.items()):
+        for k, (who, by_target) in enumerate(by_who.items()):
             series = error_series(by_target.get(name, {}))
             if not len(series):
                 continue

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from mesh_sim.plots.figure import figure, save
+from mesh_sim.run_series import scored
 
 
 def draw(metrics: dict, folder: Path) -> Path | None:
@@ -14,8 +15,7 @@ def draw(metrics: dict, folder: Path) -> Path | None:
     targets = sorted({t["target"] for a in metrics["agents"] for t in a.get("targets", [])})
     if not targets:
         return None
-    series = {a["id"]: {t["target"]: t["rmse"] for t in a.get("targets", [])} for a in metrics["agents"]}
-    series["oracle"] = {t["target"]: t["rmse"] for t in metrics["oracle"].get("targets", [])}
+    series = {who: {name: t["rmse"] for name, t in by_target.items()} for who, by_target in scored(metrics).items()}
     fig, axes = figure(width=7, height=4)
     ax = axes[0, 0]
     width = 0.8 / len(series)

@@ -203,7 +203,7 @@ def recording_stub(tmp_path) -> Path:
     return path
 
 
-def test_a_recording_is_served_as_its_own_recording_not_beside_an_empty_one(recording_stub):
+def test_the_stored_recording_id_is_read_so_the_served_recording_is_the_stored_one(recording_stub):
     stored = recording_of(recording_stub)
     assert (stored.application_id, stored.recording_id) == ("skymesh", "stub")
 
