@@ -73,6 +73,7 @@ from mesh_sim.observer_geometry import RAY_LENGTH, cov_to_ellipsoid, nearest_tru
 from mesh_sim.observer_grids import LEGEND, GridImages
 from mesh_sim.observer_messages import parse_telemetry, parse_truth
 from mesh_sim.observer_web import serve_web
+from mesh_sim.run_series import pair_states
 from mesh_sim.viewer import viewer_to_spawn
 from mesh_sim.web_options import Web, add_web_arguments, web_of
 
@@ -288,13 +289,7 @@ class Observer:
 
     def link_states(self, now: float) -> dict[tuple[str, str], bool]:
         """``{(a, b): both_ends_report}`` for a < b, from neighbour reports at most LINK_STALE_S old."""
-        fresh = {a: nbrs for a, (stamp, nbrs) in self._reports.items() if now - stamp <= LINK_STALE_S}
-        links: dict[tuple[str, str], bool] = {}
-        for a, nbrs in fresh.items():
-            for b in nbrs:
-                pair = (a, b) if a < b else (b, a)
-                links[pair] = a in fresh.get(b, ())
-        return links
+        return pair_states({a: nbrs for a, (stamp, nbrs) in self._reports.items() if now - stamp <= LINK_STALE_S})
 
     def _log_links(self, now: float) -> None:
         strips, colours = [], []

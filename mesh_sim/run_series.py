@@ -63,6 +63,16 @@ def traffic_series(agent: dict) -> np.ndarray:
     return np.array(rows, float).reshape(-1, 3)
 
 
+def pair_states(reported: dict[str, set[str]]) -> dict[tuple[str, str], bool]:
+    """``{(a, b): both_ends}`` (``a < b``) of every pair some agent reports as neighbours, from each agent's
+    reported neighbours: the link rule of the live 3D view and of ``plots/links.png`` (green both, orange one)."""
+    links: dict[tuple[str, str], bool] = {}
+    for a, peers in reported.items():
+        for b in peers:
+            links[(a, b) if a < b else (b, a)] = a in reported.get(b, ())
+    return links
+
+
 def link_intervals(neighbours: dict[str, list], end: float) -> dict[tuple[str, str], list[tuple[float, float, bool]]]:
     """``{(a, b): [(t0, t1, both_ends), ...]}`` (``a < b``): when ``a`` or ``b`` reported the other as a
     neighbour, and whether both did, from each agent's ``[[t, [peer, ...]], ...]`` changes up to ``end``."""
@@ -70,9 +80,7 @@ def link_intervals(neighbours: dict[str, list], end: float) -> dict[tuple[str, s
     out: dict[tuple[str, str], list[tuple[float, float, bool]]] = {}
     for t0, t1 in zip(times, times[1:], strict=False):
         reported = {a: _at(history, t0) for a, history in neighbours.items()}
-        pairs = {tuple(sorted((a, b))) for a, peers in reported.items() for b in peers}
-        for a, b in sorted(pairs):
-            both = b in reported.get(a, ()) and a in reported.get(b, ())
+        for (a, b), both in sorted(pair_states(reported).items()):
             spans = out.setdefault((a, b), [])
             if spans and spans[-1][1] == t0 and spans[-1][2] == both:
                 spans[-1] = (spans[-1][0], t1, both)

@@ -18,6 +18,12 @@ import numpy as np
 from agent.evaluation import BIN_S
 
 
+def finite_position(payload: dict) -> np.ndarray | None:
+    """A telemetry payload's ``position`` (north, east, down) if it is three finite numbers, else ``None``."""
+    position = np.asarray(payload.get("position", ()), float)
+    return position if position.shape == (3,) and np.all(np.isfinite(position)) else None
+
+
 class RunTraces:
     """Downsampled paths, track estimates and neighbour changes of a run (see the module docstring)."""
 
@@ -51,8 +57,8 @@ class RunTraces:
             history.append([t, peers])
         if not self._due(f"agent/{agent}", t):
             return
-        position = np.asarray(payload.get("position", ()), float)
-        if position.shape == (3,) and np.all(np.isfinite(position)):
+        position = finite_position(payload)
+        if position is not None:
             self.uavs.setdefault(agent, []).append([t, *map(float, position)])
         rows = self.tracks.setdefault(agent, [])
         for track in payload.get("tracks", []):

@@ -37,7 +37,7 @@ from mesh_sim.grid_oracle import GridOracle, grid_extent
 from mesh_sim.oracle import InFlightOracle, Oracle
 from mesh_sim.orbit_watch import OrbitWatch
 from mesh_sim.particle_oracle import ParticleOracle
-from mesh_sim.run_traces import RunTraces
+from mesh_sim.run_traces import RunTraces, finite_position
 from mesh_sim.scenario import load
 from mesh_sim.target_set import truth_snapshot
 from perception.terrain import terrain_from_config
@@ -138,8 +138,8 @@ class World:
                         samples + 1)
 
     def _note_position(self, env: wire.Envelope) -> None:
-        position = np.asarray(env.payload.get("position", ()), float)
-        if position.shape == (3,) and np.all(np.isfinite(position)):
+        position = finite_position(env.payload)
+        if position is not None:
             self.uavs[env.origin] = position.tolist()
 
     def fire_truth(self, t: float) -> tuple[list[dict], list]:
