@@ -178,6 +178,16 @@ def ratio(a: float | None, b: float | None) -> float | None:
     return None if a is None or not b else a / b
 
 
+def missed_steps(agents: Iterable[Mapping]) -> tuple[int, int]:
+    """``(missed, due)`` agent steps of a run's agents: late (``deadline_misses``) or skipped, over steps run plus
+    skipped (:mod:`agent.runtime`); every agent given must report ``steps``."""
+    missed = due = 0
+    for a in agents:
+        missed += a.get("deadline_misses", 0) + a.get("skipped_steps", 0)
+        due += a["steps"] + a.get("skipped_steps", 0)
+    return missed, due
+
+
 def fmt_ratio(value: float | None) -> str:
     if value is None or not math.isfinite(value):
         return "—"

@@ -227,8 +227,7 @@ def _summarise(cap: float, outcomes: list[dict], agents: int, duration: float) -
     completed = all(o["status"] == "completed" for o in outcomes) and len(ran) == agents * len(outcomes)
     tracking = completed and bool(coverage) and min(coverage) >= COVERAGE_GOAL
     consistent = anees is not None and anees <= hi
-    due = sum(a["steps"] + a.get("skipped_steps", 0) for a in ran)
-    missed = sum(a.get("deadline_misses", 0) + a.get("skipped_steps", 0) for a in ran)
+    missed, due = common.missed_steps(ran)
     return {
         "cap": cap, "status": "; ".join(sorted({o["status"] for o in outcomes})), "completed": completed,
         "delivered_bytes_per_agent_s": sum(a.get("bytes_rx", 0) for a in ran) / agent_s,  # received per agent

@@ -113,8 +113,7 @@ def _one_run(label: str, base: Path, console: Console, agents: int, duration: fl
     metrics = outcome.metrics
     fleet = metrics.get("fleet", {})
     team = [a for a in metrics.get("agents", []) if "steps" in a]
-    missed = sum(a.get("deadline_misses", 0) + a.get("skipped_steps", 0) for a in team)
-    steps = sum(a["steps"] + a.get("skipped_steps", 0) for a in team)
+    missed, steps = common.missed_steps(team)
     row = {"run": label, "status": outcome.status, "rmse": fleet.get("rmse"), "anees": fleet.get("anees"),
            "rmse_ratio_to_oracle": fleet.get("rmse_ratio_to_oracle"),
            "bytes_per_agent_per_s": fleet.get("bytes_per_agent_per_s"),
