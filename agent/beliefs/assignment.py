@@ -134,15 +134,16 @@ class AssignmentExchange:
         if not self._news(held) and t - self._sent_at < self.config.period:
             if not self._strayed(t, at) or not self._crowded(at):
                 return None
-            self._told = (t, at, v)
-            return Outgoing(motion)
-        self._sent, self._sent_at, self._disputed, self._told = held, t, False, (t, at, v)
+            return Outgoing(motion, context=(t, at, v))
+        self._sent, self._sent_at, self._disputed = held, t, False
         return Outgoing({**motion, "stamps": dict(bids.stamps),
-                         "tasks": [[_wire_key(key), *entry] for key, entry in held.items()]})
+                         "tasks": [[_wire_key(key), *entry] for key, entry in held.items()]}, context=(t, at, v))
 
     def _strayed(self, t: float, at: np.ndarray) -> bool:
-        """Whether this vehicle is farther than the dead-reckoning tolerance from where its peers reckon it (asked
-        only once bids went out, and with them ``_told``)."""
+        """Whether this vehicle is farther than the dead-reckoning tolerance from where its peers reckon it (from
+        nothing: it never told them)."""
+        if self._told is None:
+            return True
         return float(np.hypot(*(at - _reckoned(self._told, t)))) > DEAD_RECKONING_TOLERANCE * self.config.min_separation
 
     def _news(self, held: dict) -> bool:
@@ -173,10 +174,12 @@ class AssignmentExchange:
         return nearest < CROWD * self.config.min_separation
 
     def sent(self, seq: int, message: Outgoing) -> None:
-        return None
+        """The motion the peers now reckon this vehicle from: only a message that left tells them."""
+        self._told = message.context
 
     def thinned(self, message: Outgoing) -> None:
-        self._sent = None  # not sent: the bids go again next step
+        if "tasks" in message.payload:
+            self._sent = None  # not sent: the bids go again next step (a motion alone goes again as itself)
 
     def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
                 t: float) -> list[tuple[str, str | None]]:

@@ -44,12 +44,20 @@ def _exchange(me, position, tracks, **config):
                               Views({"track": _Picture(tracks)}), vehicle)
 
 
+def _offer(x, t, neighbours=()):
+    """``x``'s message at ``t``, handed back to it as sent, as the agent's host does (``None``: nothing to say)."""
+    message = x.outgoing(t, list(neighbours))
+    if message is not None:
+        x.sent(int(t * 10) + 1, message)
+    return message
+
+
 def _talk(a, b, t):
     """One round: both settle, then each hears the other's message (through the real wire schema)."""
     for x in (a, b):
         x.settle(t)
     for sender, receiver in ((a, b), (b, a)):
-        message = sender.outgoing(t, [receiver.me])
+        message = _offer(sender, t, [receiver.me])
         if message is not None:
             data = wire.encode(wire.Envelope(kind="tasks", origin=sender.me, seq=int(t * 10) + 1, stamp=t,
                                              payload=message.payload))
@@ -95,14 +103,14 @@ def test_the_nearer_agent_wins_a_lone_target_and_the_other_searches():
 def test_bids_are_resent_only_when_changed_or_due():
     a = _exchange("a", (0.0, 0.0), [], period=1.0)
     a.settle(0.0)
-    assert a.outgoing(0.0, []) is not None
-    assert a.outgoing(0.2, []) is None  # nothing changed
-    assert a.outgoing(1.0, []) is not None  # the heartbeat
+    assert _offer(a, 0.0) is not None
+    assert _offer(a, 0.2) is None  # nothing changed
+    assert _offer(a, 1.0) is not None  # the heartbeat
 
 
 def _bids_sent(a, t):
     """Whether ``a`` sends its bids at ``t`` (not nothing, not its position alone)."""
-    message = a.outgoing(t, [])
+    message = _offer(a, t)
     return message is not None and "tasks" in message.payload
 
 
@@ -138,7 +146,7 @@ def test_a_peer_that_names_another_winner_gets_the_bids_at_once():
         x.settle(0.0)
     assert _bids_sent(a, 0.0) and b.cbba.winners["track:0"] == "b"
     assert not _bids_sent(a, 0.2)  # nothing new
-    claim = b.outgoing(0.2, []).payload
+    claim = _offer(b, 0.2).payload
     a.receive("b", 1, 0.2, claim, Edge.TREE, 0.2)
     assert a.cbba.winners["track:0"] == "a"  # a out-bids b: b believes a wrong winner ...
     assert _bids_sent(a, 0.4)  # ... and hears a's bids on the next step, not a period later
@@ -150,12 +158,12 @@ def test_a_crowded_vehicle_sends_its_motion_alone_once_it_strays_from_where_its_
     _talk(a, b, 0.0)  # bids with a at rest
     where = {x: x.vehicle.state().position[:2] for x in (a, b)}
     assert a._crowded(where[a]) and b._crowded(where[b])  # 15 m apart: within CROWD minimum separations
-    assert a.outgoing(0.2, []) is None  # at rest, where b reckons it: nothing to say
+    assert _offer(a, 0.2) is None  # at rest, where b reckons it: nothing to say
     reach = DEAD_RECKONING_TOLERANCE * a.config.min_separation
     monkeypatch.setattr(a.vehicle, "state", lambda: _State([0.9 * reach, 0.0, -80.0], [5.0, 0.0, 0.0]))
-    assert a.outgoing(0.4, []) is None  # it moved, but less than the tolerance
+    assert _offer(a, 0.4) is None  # it moved, but less than the tolerance
     monkeypatch.setattr(a.vehicle, "state", lambda: _State([1.1 * reach, 0.0, -80.0], [5.0, 0.0, 0.0]))
-    message = a.outgoing(0.6, [])
+    message = _offer(a, 0.6)
     assert set(message.payload) == {"at", "v"}
     data = wire.encode(wire.Envelope(kind="tasks", origin="a", seq=2, stamp=0.6, payload=message.payload))
     merges, winners = b.merges, dict(b.cbba.winners)
@@ -166,7 +174,23 @@ def test_a_crowded_vehicle_sends_its_motion_alone_once_it_strays_from_where_its_
     assert b.peers["a"] == pytest.approx([1.1 * reach + 5.0 * 0.4, 0.0])  # and flown on at its velocity
     # flying on at that velocity, a stays where b reckons it: nothing more to say
     monkeypatch.setattr(a.vehicle, "state", lambda: _State([1.1 * reach + 5.0 * 0.4, 0.0, -80.0], [5.0, 0.0, 0.0]))
-    assert a.outgoing(1.0, []) is None
+    assert _offer(a, 1.0) is None
+
+
+def test_a_motion_the_link_budget_refused_is_offered_again_until_it_leaves(monkeypatch):
+    """Bad luck on the radio: the link budget thins a crowded vehicle's motion message. Its peers still reckon
+    it from the last motion that left, so it must not take the refused one as told, and what it offers again is
+    that motion, not its whole bids (which a budget that just refused the motion would refuse the more)."""
+    a, b = _exchange("a", (0.0, 0.0), [], period=10.0), _exchange("b", (0.0, 15.0), [], period=10.0)
+    _talk(a, b, 0.0)
+    reach = DEAD_RECKONING_TOLERANCE * a.config.min_separation
+    monkeypatch.setattr(a.vehicle, "state", lambda: _State([2 * reach, 0.0, -80.0], [0.0, 0.0, 0.0]))
+    refused = a.outgoing(0.2, [])
+    assert set(refused.payload) == {"at", "v"}
+    a.thinned(refused)  # the host could not admit it
+    again = _offer(a, 0.4)
+    assert set(again.payload) == {"at", "v"} and again.payload["at"] == refused.payload["at"]  # not all the bids
+    assert _offer(a, 0.6) is None  # once it left, the peers reckon it right
 
 
 @pytest.mark.parametrize("payload, reason", [
