@@ -38,7 +38,7 @@ REPO = Path(__file__).resolve().parents[2]
 DEPLOY = REPO / "deploy"
 CLIENTS = ["uav0", "uav1", "ground", "world", "stranger"]  # stranger: a CN router.json5 does not name
 AGENTS_TIMEOUT_S = 60.0  # for the agents to start and to hear each other, however loaded the machine
-REPORTS = 6  # topology reports heard from each agent: 2.5 s of beacons (agent.net.topology.BEACON_PERIOD 0.5 s)
+REPORTS = 6  # topology reports heard from each agent: 3-12 s of beacons or refreshes (agent.net.topology)
 REPEATS = 5  # puts of one declared publisher
 SETTLE_S = 1.0  # for declarations to reach the router and back before a put (chosen here; loopback takes ms)
 

@@ -15,7 +15,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from agent.net import wire
-from agent.net.topology import BEACON_PERIOD, NEIGHBOUR_TIMEOUT, Topology, report_lifetime
+from agent.net.topology import BEACON_PERIOD, NEIGHBOUR_TIMEOUT, REFRESH_PERIOD, Topology, report_lifetime
 from fusion.resync import Edge
 
 ME = "a0"
@@ -180,6 +180,29 @@ def test_own_report_goes_out_when_the_neighbours_change_or_a_beacon_is_due():
     assert topo.outgoing(half + BEACON_PERIOD) == {"reports": {ME: [half + BEACON_PERIOD, ["a1"]]}}
     later = half + NEIGHBOUR_TIMEOUT + 0.01  # a1 timed out: a change, sent at once
     assert topo.outgoing(later) == {"reports": {ME: [later, []]}}
+
+
+def test_an_agent_that_broadcasts_beliefs_needs_no_beacon_only_a_refresh_of_its_report():
+    """Bad input for the old rule: an agent heard every step (it sends beliefs) beaconed every 0.5 s anyway —
+    6.5 of the 35 messages each agent received per step with 20 agents. Now, while it speaks, its report goes
+    out only every REFRESH_PERIOD (it must stay fresh); once it falls silent, beacons resume."""
+    topo, step = Topology(ME), 0.2
+    topo.heard("a1", 0.0)
+    sent = []
+    for k in range(round(2 * REFRESH_PERIOD / step) + 1):
+        t = k * step
+        topo.heard("a1", t)
+        if topo.outgoing(t) is not None:
+            sent.append(round(t, 6))
+        topo.spoke(t)  # this step's beliefs, broadcast after the topology message (Agent.step's order)
+    assert sent == [0.0, REFRESH_PERIOD, 2 * REFRESH_PERIOD]
+    quiet = 2 * REFRESH_PERIOD  # silent from here on: heard by nobody unless it beacons
+    assert topo.outgoing(quiet + 0.9 * BEACON_PERIOD) is None
+    assert topo.outgoing(quiet + BEACON_PERIOD) == {"reports": {ME: [quiet + BEACON_PERIOD, ["a1"]]}}
+    assert topo.outgoing(quiet + BEACON_PERIOD + step) is None
+    topo.heard("a2", quiet + 1.0)  # a new neighbour: reported at once, however recently we spoke
+    topo.spoke(quiet + 1.0)
+    assert topo.outgoing(quiet + 1.0) == {"reports": {ME: [quiet + 1.0, ["a1", "a2"]]}}
 
 
 def test_a_full_mesh_relays_nothing_and_a_line_relays_each_new_report_once():
