@@ -16,8 +16,8 @@ as before, against marginals and gate distances computed once per step.
 
 Messages: ``{"increments": [[origin, n, bearings], ...], "acks": {origin: [highest, mask]}}`` with the
 bearings as in :mod:`agent.beliefs.bearing_codec`. A message is sent when an increment is due
-(:meth:`FloodRelay.due`) or this agent received something new since its last message (its
-acknowledgements stop the neighbours' retransmissions).
+(:meth:`FloodRelay.due`) or this agent has held something unacknowledged for ``ack_delay``
+(:meth:`FloodRelay.acks_due`: its acknowledgements stop the neighbours' retransmissions).
 """
 
 from __future__ import annotations
@@ -38,8 +38,9 @@ class FloodExchange(TrackExchange):
     def __init__(self, *args, incarnation: int = 0, **kwargs):
         super().__init__(*args, **kwargs)
         model = self.tracker.model
-        self.relay = FloodRelay(self.me, self.sender.config.ack_timeout, (model.window - 1) * model.step,
-                                first=first_number(incarnation))
+        config = self.sender.config
+        self.relay = FloodRelay(self.me, config.ack_timeout, (model.window - 1) * model.step,
+                                first=first_number(incarnation), ack_delay=config.ack_delay)
         self.too_old = 0  # received detections that no longer fit the trajectory window
         self.held: list[list[Bearing]] = []  # this step's scans, applied by settle
 
@@ -53,7 +54,7 @@ class FloodExchange(TrackExchange):
     # -- sending ----------------------------------------------------------------------------------
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
         due = self.relay.due(t, neighbours, lambda agent: self.topology.neighbours_of(agent, t))
-        if not due and not self.relay.acks_changed():
+        if not due and not self.relay.acks_due(t):
             return None
         payload = {"increments": [[inc.origin, inc.n, inc.data] for inc in due], "acks": self.relay.acks()}
         return Outgoing(payload, context=(t, due))

@@ -14,6 +14,14 @@ equivalent of the centralized information filter's additive measurement update (
 ``n`` and a bitmask of the :data:`ACK_SPAN` numbers below it (:class:`Held`). A neighbour holds an
 increment when it acknowledged it or sent it to us.
 
+An agent with acknowledgements but no increment to send waits ``ack_delay`` after its first unacknowledged
+receipt before it broadcasts them alone (:meth:`FloodRelay.acks_due`), so that the receipts of a few steps
+share one message. On a full mesh every agent hears every increment: with 20 agents, 7 detections a step
+across the fleet and no delay, every agent acknowledged at every step, two thirds of its flood messages
+carrying nothing else (997 of 1509 in 15 s), and each was received by the 19 others. ``ack_timeout`` must
+cover that wait on top of the round trip, or the origin retransmits what was received
+(:class:`agent.net.sending.SendConfig` checks ``ack_delay < ack_timeout``).
+
 **When to send** (:meth:`FloodRelay.due`). An increment is broadcast when a current neighbour does not hold
 it, and
 
@@ -120,15 +128,17 @@ class FloodRelay:
     """The flooding state of one agent: its own increments and the ones it relays, with the neighbours'
     acknowledgements."""
 
-    def __init__(self, me: str, ack_timeout: float, horizon: float, first: int = 0):
+    def __init__(self, me: str, ack_timeout: float, horizon: float, first: int = 0, ack_delay: float = 0.0):
         if not ack_timeout > 0 or not horizon > 0:
             raise ValueError(f"ack_timeout and horizon must be positive, got {ack_timeout}, {horizon}")
-        self.me, self.ack_timeout, self.horizon = me, ack_timeout, horizon
+        if not 0 <= ack_delay < ack_timeout:
+            raise ValueError(f"ack_delay must be in [0, ack_timeout = {ack_timeout}), got {ack_delay}")
+        self.me, self.ack_timeout, self.horizon, self.ack_delay = me, ack_timeout, horizon, ack_delay
         self._count = first  # our increments' numbers start here: after a restart, above the old life's
         self._held: dict[tuple[str, int], Increment] = {}
         self._mine: dict[str, Held] = {}  # origin -> what this agent holds
         self._theirs: dict[str, dict[str, tuple[int, int]]] = {}  # neighbour -> origin -> (highest, mask) it acked
-        self._acks_sent: dict | None = None
+        self._unacked_since: float | None = None  # when the oldest receipt not yet in a broadcast arrived
         self.relayed = 0  # increments broadcast that originated elsewhere
         self.retransmitted = 0  # broadcasts of an increment after its first
 
@@ -149,6 +159,8 @@ class FloodRelay:
             return False
         if origin == self.me or not self._mine.setdefault(origin, Held()).add(n):
             return False  # ours coming back, or one already applied and since expired
+        if self._unacked_since is None:
+            self._unacked_since = now
         if now - t > self.horizon:
             return True  # new, but too old to be worth relaying: the caller decides whether it can still use it
         self._held[key] = Increment(origin, n, t, data, sender, now, holders={sender})
@@ -216,19 +228,16 @@ class FloodRelay:
             elif inc.origin != self.me:
                 self.relayed += 1
             inc.last_sent = now
-        self._acks_sent = self._ack_state()
+        self._unacked_since = None  # every broadcast carries all our acknowledgements
 
     def acks(self) -> dict[str, list[int]]:
         """What this agent holds, per origin, for its next message."""
         return {origin: held.wire() for origin, held in self._mine.items()}
 
-    def acks_changed(self) -> bool:
-        """Has this agent received something since its last broadcast? (Then its neighbours should hear
-        its acknowledgements even if it has nothing to send.)"""
-        return self._ack_state() != self._acks_sent
-
-    def _ack_state(self) -> dict:
-        return {origin: (held.high, held.mask) for origin, held in self._mine.items() if origin != self.me}
+    def acks_due(self, now: float) -> bool:
+        """Should this agent broadcast its acknowledgements even with no increment due? Yes once it has held
+        something unacknowledged for ``ack_delay`` (see the module docstring)."""
+        return self._unacked_since is not None and now - self._unacked_since >= self.ack_delay - 1e-9
 
     def _expire(self, now: float) -> None:
         for key in [k for k, inc in self._held.items() if now - inc.t > self.horizon]:

@@ -35,12 +35,19 @@ class SendConfig:
     period: float = 1.0  # s between track broadcasts; chosen here
     info_gain: float = 0.1  # nats of new information that make a track worth sending; chosen here
     max_silence: float = 3.0  # s: every confirmed track is re-sent at least this often; chosen here
-    ack_timeout: float = 0.4  # s: flood policy, re-send an increment unacknowledged after a round trip (2 steps)
+    #: s: flood policy, re-send an increment unacknowledged this long: the acknowledgement's wait
+    #: (``ack_delay``) plus a round trip (2 steps at 5 Hz)
+    ack_timeout: float = 0.6
+    #: s: flood policy, acknowledgements with nothing else to send wait this long for more to join them
+    #: (:mod:`agent.net.flood_relay`); chosen here: one step at 5 Hz
+    ack_delay: float = 0.2
 
     def __post_init__(self):
         for name in ("period", "max_silence", "ack_timeout"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise ValueError(f"sending.{name} must be positive, got {getattr(self, name)!r}")
+        if not (np.isfinite(self.ack_delay) and 0 <= self.ack_delay < self.ack_timeout):
+            raise ValueError(f"sending.ack_delay must be in [0, ack_timeout = {self.ack_timeout}), got {self.ack_delay!r}")
         if not (np.isfinite(self.info_gain) and self.info_gain >= 0):
             raise ValueError(f"sending.info_gain must be non-negative, got {self.info_gain!r}")
 

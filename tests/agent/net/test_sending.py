@@ -299,6 +299,10 @@ def test_default_burst_is_the_links():
         ({"max_silence": math.inf}, "sending.max_silence must be positive"),
         ({"info_gain": -0.1}, "sending.info_gain must be non-negative"),
         ({"info_gain": math.nan}, "sending.info_gain must be non-negative"),
+        ({"ack_delay": 0.6}, r"sending.ack_delay must be in \[0, ack_timeout = 0.6\)"),  # as long as the timeout
+        ({"ack_delay": 1.0, "ack_timeout": 0.8}, "sending.ack_delay must be in"),  # longer than the timeout
+        ({"ack_delay": -0.2}, "sending.ack_delay must be in"),
+        ({"ack_delay": math.nan}, "sending.ack_delay must be in"),
     ],
 )
 def test_bad_config(kwargs, message):
