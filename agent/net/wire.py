@@ -50,9 +50,12 @@ import numpy as np
 from agent.net import roster, schemas
 
 SCHEMA_VERSION = 1
-#: The Zenoh encoding every message is published with (``agent.net.zenoh_transport``): the format and its version,
-#: so a subscriber knows what the bytes are before it parses them (Zenoh's default would be ``zenoh/bytes``)
-ZENOH_ENCODING = f"application/msgpack;skymesh-wire={SCHEMA_VERSION}"
+#: The Zenoh encoding every message is published with (``agent.net.zenoh_transport``): Zenoh's predefined
+#: ``zenoh/bytes`` with the schema ``skymesh/<version>``, so a subscriber knows what the bytes are before it parses
+#: them. Zenoh sends a predefined encoding as a number and only the schema as text: about 11 bytes a message
+#: where ``application/msgpack;skymesh-wire=1`` (no predefined number: all text) cost 38 — measured on loopback,
+#: per message and hop, a tenth of the fleet's bytes on the wire.
+ZENOH_ENCODING = f"zenoh/bytes;skymesh/{SCHEMA_VERSION}"
 
 #: Message kinds this module knows (those with a schema). Another module extends the set without touching
 #: this one: ``decode(data, kinds=wire.KINDS | {"particles"})`` (a kind without a schema decodes as a

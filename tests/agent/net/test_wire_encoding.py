@@ -1,7 +1,7 @@
-"""Every message travels with the Zenoh encoding ``application/msgpack;skymesh-wire=1`` (the format and its
-version), and a receiver rejects another one as a malformed message (``bad_encoding``) without losing anything
-else (issue 18, item 4). The bad inputs: the same bytes under ``zenoh/bytes`` (Zenoh's default) and under
-``skymesh-wire=2`` (a newer version)."""
+"""Every message travels with the Zenoh encoding ``zenoh/bytes;skymesh/1`` (the format and its version), and a
+receiver rejects another one as a malformed message (``bad_encoding``) without losing anything else (issue 18,
+item 4). The bad inputs: the same bytes under ``zenoh/bytes`` (Zenoh's default), under ``skymesh/2`` (a newer
+version) and under the format's earlier name ``application/msgpack;skymesh-wire=1``."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from agent.net.keys import Keys
 from agent.net.zenoh_transport import ZenohTransport, client_config
 from mesh_sim.scenario import load
 
-WRONG = ("zenoh/bytes", "application/msgpack;skymesh-wire=2")
+WRONG = ("zenoh/bytes", "zenoh/bytes;skymesh/2", "application/msgpack;skymesh-wire=1")  # none, next version, old name
 
 
 def _envelope() -> bytes:
@@ -27,8 +27,7 @@ def _envelope() -> bytes:
 
 
 def test_the_encoding_names_the_format_and_its_version():
-    assert wire.ZENOH_ENCODING == f"application/msgpack;skymesh-wire={wire.SCHEMA_VERSION}" == \
-        "application/msgpack;skymesh-wire=1"
+    assert wire.ZENOH_ENCODING == f"zenoh/bytes;skymesh/{wire.SCHEMA_VERSION}" == "zenoh/bytes;skymesh/1"
 
 
 @pytest.mark.parametrize("encoding", WRONG)
@@ -36,7 +35,7 @@ def test_a_wrong_encoding_is_rejected_with_its_reason(encoding):
     with pytest.raises(wire.DecodeError) as err:
         wire.check_encoding(encoding)
     assert err.value.reason == "bad_encoding"
-    assert str(err.value) == f"bad_encoding: Zenoh encoding {encoding!r}, expected 'application/msgpack;skymesh-wire=1'"
+    assert str(err.value) == f"bad_encoding: Zenoh encoding {encoding!r}, expected 'zenoh/bytes;skymesh/1'"
     wire.check_encoding(wire.ZENOH_ENCODING)
     wire.check_encoding(None)  # the in-memory bus has no encoding: nothing to check
 
@@ -52,7 +51,7 @@ def _drain_until(transport: ZenohTransport, key: str, count: int, timeout: float
 
 def test_over_real_sessions_the_encoding_travels_and_a_wrong_one_is_counted_not_fused(zenoh_router):
     """Agent uav1 publishes over Zenoh; a spy session sees its encoding, then replays uav1's topology message
-    under each wrong encoding; agent uav0 rejects the two copies as ``bad_encoding`` and uses uav1's own."""
+    under each wrong encoding; agent uav0 rejects those copies as ``bad_encoding`` and uses uav1's own."""
     scenario = load("default", agents=2).agent
     keys = Keys(f"enc-{uuid.uuid4().hex[:8]}")
     spy = zenoh.open(client_config([zenoh_router]))
@@ -76,15 +75,15 @@ def test_over_real_sessions_the_encoding_travels_and_a_wrong_one_is_counted_not_
             time.sleep(0.02)
         with lock:
             data, encoding = seen[0]
-        assert encoding == "application/msgpack;skymesh-wire=1"
+        assert encoding == "zenoh/bytes;skymesh/1"
         for wrong in WRONG:
             spy.put(keys.topology("uav1"), data, encoding=zenoh.Encoding(wrong))
-        items = _drain_until(receiver, keys.topology("uav1"), 3)
+        items = _drain_until(receiver, keys.topology("uav1"), 1 + len(WRONG))
         topology = [item for item in items if item.key == keys.topology("uav1")]
         assert sorted(item.encoding for item in topology) == sorted([wire.ZENOH_ENCODING, *WRONG])
         for item in items:
             uav0.receive(item, 0.0)
-        assert uav0.rejected == {"bad_encoding": 2}
+        assert uav0.rejected == {"bad_encoding": len(WRONG)}
         assert uav0.bytes_rx[("uav1", "topology")] == len(data)  # uav1's own copy was used, whatever the order
     finally:
         spy_sub.undeclare()
