@@ -203,7 +203,7 @@ class Agent:
         self.topology.spoke(t)  # the peers heard us: no beacon needed yet
 
     def _publish_topology(self, t: float) -> None:
-        """Who this agent hears, to its peers when it changed, a beacon or a refresh is due (:mod:`agent.net.topology`)."""
+        """Who this agent hears, to its peers on a change, a beacon or a refresh (:mod:`agent.net.topology`)."""
         if (payload := self.topology.outgoing(t)) is not None:
             self._publish("topology", self.keys.topology(self.id), t, payload)
 

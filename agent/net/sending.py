@@ -47,7 +47,8 @@ class SendConfig:
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise ValueError(f"sending.{name} must be positive, got {getattr(self, name)!r}")
         if not (np.isfinite(self.ack_delay) and 0 <= self.ack_delay < self.ack_timeout):
-            raise ValueError(f"sending.ack_delay must be in [0, ack_timeout = {self.ack_timeout}), got {self.ack_delay!r}")
+            raise ValueError(f"sending.ack_delay must be in [0, ack_timeout = {self.ack_timeout}), "
+                             f"got {self.ack_delay!r}")
         if not (np.isfinite(self.info_gain) and self.info_gain >= 0):
             raise ValueError(f"sending.info_gain must be non-negative, got {self.info_gain!r}")
 
