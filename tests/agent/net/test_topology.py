@@ -205,6 +205,25 @@ def test_an_agent_that_broadcasts_beliefs_needs_no_beacon_only_a_refresh_of_its_
     assert topo.outgoing(quiet + 1.0) == {"reports": {ME: [quiet + 1.0, ["a1", "a2"]]}}
 
 
+def test_a_new_neighbour_gets_every_fresh_report_at_once():
+    """Bad input for a relay-only rule: the merge of a partition. a0 - a1 | a2 - a3 on a line; the link a1 - a2
+    comes back. a1 hears a2 again and sends its report, but a2 needs a0's report too before its knowledge is
+    complete (a1 names a0), and a0 reports only on changes and every REFRESH_PERIOD: without the exchange, a2
+    fused by intersection for up to 2 s (5 times per agent in the lockstep partition run). Like OSPF neighbours
+    exchanging their databases on a new adjacency, a1 sends every fresh report it holds to its new neighbour."""
+    a1 = Topology("a1")
+    a1.heard("a0", 1.0)
+    tell(a1, {"a0": [1.0, ["a1"]]}, sender="a0", t=1.0)
+    assert a1.outgoing(1.0) == {"reports": {"a1": [1.0, ["a0"]]}}  # a0 heard its own report itself
+    a1.heard("a0", 1.2)
+    a1.spoke(1.2)
+    assert a1.outgoing(1.2) is None
+    a1.heard("a2", 1.4)  # the merge
+    assert a1.outgoing(1.4) == {"reports": {"a0": [1.0, ["a1"]], "a1": [1.4, ["a0", "a2"]]}}
+    a1.spoke(1.4)
+    assert a1.outgoing(1.6) is None  # once
+
+
 def test_a_full_mesh_relays_nothing_and_a_line_relays_each_new_report_once():
     """Full mesh a0, a1, a2: every neighbour of a0 heard a1's report from a1 itself. Line a1 - a0 - a2: a2
     cannot hear a1, so a0 relays a1's new report once (and not again until a1 reports anew)."""
