@@ -17,11 +17,10 @@ It relays a report it has just learnt only when some neighbour of its own cannot
 from the report's agent or from the peer that passed it on — and gives a new neighbour at once every fresh report
 that neighbour cannot have heard from its author (OSPF's database exchange on a new adjacency: at a partition's
 merge, waiting for the far side's next refresh left knowledge incomplete, and hybrid intersecting, for up to 2 s).
-On a full mesh nothing is relayed, so each agent
-receives one small message per peer and refresh period while the fleet talks, one per beacon period while it
-is silent: messages grow linearly with the fleet, not with its square (every agent used to put every report
-in its telemetry at every step, then beaconed every 0.5 s: 6.5 of the 35 messages an agent received per step
-with 20 agents).
+On a full mesh nothing is relayed, so each agent receives one small message per peer and refresh period while the
+fleet talks, one per beacon period while it is silent: messages grow linearly with the fleet, not with its square
+(every agent used to put every report in its telemetry at every step, then beaconed every 0.5 s: 6.5 of the 35
+messages an agent received per step with 20 agents).
 
 Knowledge is trusted only when it is complete: every agent that appears in a fresh report, as reporter
 or as neighbour, has a fresh report of its own. Otherwise every link is treated as possibly on a loop,
