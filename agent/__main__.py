@@ -39,6 +39,7 @@ from pathlib import Path
 
 from agent.agent import Agent
 from agent.config import AgentScenario, read_scenario_file
+from agent.memory import fix_mmap_threshold
 from agent.net.fleet_key import read_key_file
 from agent.net.keys import Keys
 from agent.net.zenoh_transport import ZenohTransport, load_config
@@ -112,6 +113,7 @@ def _open_camera(source: str):
 
 def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    fix_mmap_threshold()  # freed frames go back to the system, not to a growing heap (agent.memory)
     args = parse_args(argv)
     try:
         scenario = AgentScenario.from_dict(read_scenario_file(args.scenario))

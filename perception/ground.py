@@ -28,9 +28,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
+
+from perception.shared_arrays import digest, shared_arrays
 
 __all__ = ["GroundTexture", "GroundLayer", "FlatGround", "TerrainGround", "ground_view"]
 
@@ -84,21 +87,26 @@ class GroundTexture:
         self.style, self.resolution_m, self.size_px = style, float(resolution_m), int(size_px)
         self.origin_ne = (float(origin_ne[0]), float(origin_ne[1]))
         self.ambient_K, self.thermal_span_K = float(ambient_K), float(thermal_span_K)
+        # The pyramid is the same in every process that asks for these parameters: one copy per machine, mapped
+        # from a cache file (perception.shared_arrays: 21 MB at 1024 texels, shared by all the camera agents).
+        name = "ground-" + digest(style, self.resolution_m, size_px, tile_size_m, seed, Path(__file__).read_bytes())
+        count = int(math.log2(size_px)) - 5  # levels down to 64 texels
+        self.levels: list[np.ndarray] = shared_arrays(name, count, lambda: self._pyramid(seed, tile_size_m))
+        self._boxed: dict[tuple[int, int], np.ndarray] = {}
+
+    def _pyramid(self, seed: int, tile_size_m: float) -> list[np.ndarray]:
+        """Mip levels of 2×2-tiled copies of the texture: any footprint smaller than one period fits in one
+        window."""
         rng = np.random.default_rng(seed)
-        base = self._terrain(rng) if style == "terrain" else self._tiles(rng, tile_size_m)
-        # Pyramid of 2×2-tiled copies: any footprint smaller than one period fits in one window.
-        self.levels: list[np.ndarray] = []
-        tile = base
+        tile = self._terrain(rng) if self.style == "terrain" else self._tiles(rng, tile_size_m)
+        levels = []
         while True:
-            self.levels.append(np.tile(tile, (2, 2, 1)))
+            levels.append(np.tile(tile, (2, 2, 1)))
             if tile.shape[0] <= 64:
-                break
+                return levels
             # Periodic pyrDown: pad with wrapped texels so the tile stays seamless at every level.
             padded = np.pad(tile, ((8, 8), (8, 8), (0, 0)), mode="wrap")
             tile = np.ascontiguousarray(cv2.pyrDown(padded)[4:-4, 4:-4])
-        for level in self.levels:
-            level.setflags(write=False)
-        self._boxed: dict[tuple[int, int], np.ndarray] = {}
 
     @property
     def period_m(self) -> float:
