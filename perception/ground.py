@@ -37,6 +37,8 @@ from perception.shared_arrays import digest, shared_arrays
 
 __all__ = ["GroundTexture", "GroundLayer", "FlatGround", "TerrainGround", "ground_view"]
 
+_SMALLEST_LEVEL = 64  # texels: the pyramid's last level
+
 
 def _periodic_noise(size: int, cells: int, rng: np.random.Generator) -> np.ndarray:
     """Smooth value noise in [0, 1] on a ``size×size`` torus with ``cells`` random nodes per side."""
@@ -82,15 +84,17 @@ class GroundTexture:
     ):
         if style not in ("terrain", "tiles"):
             raise ValueError(f"unknown ground style {style!r}")
-        if size_px < 64 or size_px & (size_px - 1):
+        if size_px < _SMALLEST_LEVEL or size_px & (size_px - 1):
             raise ValueError("size_px must be a power of two ≥ 64")
         self.style, self.resolution_m, self.size_px = style, float(resolution_m), int(size_px)
         self.origin_ne = (float(origin_ne[0]), float(origin_ne[1]))
         self.ambient_K, self.thermal_span_K = float(ambient_K), float(thermal_span_K)
         # The pyramid is the same in every process that asks for these parameters: one copy per machine, mapped
         # from a cache file (perception.shared_arrays: 21 MB at 1024 texels, shared by all the camera agents).
-        name = "ground-" + digest(style, self.resolution_m, size_px, tile_size_m, seed, Path(__file__).read_bytes())
-        count = int(math.log2(size_px)) - 5  # levels down to 64 texels
+        # Its name also holds what builds it: this module's source and the numpy and OpenCV versions.
+        name = "ground-" + digest(style, self.resolution_m, size_px, tile_size_m, seed, Path(__file__).read_bytes(),
+                                  np.__version__, cv2.__version__)
+        count = int(math.log2(size_px // _SMALLEST_LEVEL)) + 1
         self.levels: list[np.ndarray] = shared_arrays(name, count, lambda: self._pyramid(seed, tile_size_m))
         self._boxed: dict[tuple[int, int], np.ndarray] = {}
 
@@ -102,7 +106,7 @@ class GroundTexture:
         levels = []
         while True:
             levels.append(np.tile(tile, (2, 2, 1)))
-            if tile.shape[0] <= 64:
+            if tile.shape[0] <= _SMALLEST_LEVEL:
                 return levels
             # Periodic pyrDown: pad with wrapped texels so the tile stays seamless at every level.
             padded = np.pad(tile, ((8, 8), (8, 8), (0, 0)), mode="wrap")
