@@ -13,7 +13,8 @@ Everything else is :class:`mesh_sim.launcher.Launcher`'s, through two seams: whe
 the run opens (a router per host, :class:`Routers`; every child connects to ``tcp/127.0.0.1`` of its namespace,
 so to its own host's). The run folder is ``skymesh run``'s,
 plus ``testbed.json``: each host's address and its veth's kernel counters (:meth:`mesh_sim.netns.Network.counters`),
-the link events as they happened, the rate cap, and the bytes comparison of :func:`bytes_check`.
+the link events as they happened (with the host's counters while down), the rate cap, and the bytes comparison
+of :func:`bytes_check`.
 
 Impairments are the kernel's: ``--link-down T:uavK[:T_UP]`` sets host K's veth down at simulation time T (and
 up at T_UP), ``--tbf-rate BYTES_PER_S`` caps what every UAV host sends with ``tc ... tbf`` (not the ground: the
@@ -119,7 +120,9 @@ class Routers:
 
 
 class LinkEvents(threading.Thread):
-    """Takes links down and up at their simulation times (wall time = epoch + t / speed); records when it did."""
+    """Takes links down and up at their simulation times (wall time = epoch + t / speed); records when it did and
+    the host's veth counters while its link is down (just after taking it down, just before bringing it up), so
+    that what crossed the link while it was down — nothing — is a difference of two records."""
 
     def __init__(self, net: netns.Network, events: list[LinkDown], epoch: float, speed: float):
         super().__init__(name="link-events", daemon=True)
@@ -133,8 +136,13 @@ class LinkEvents(threading.Thread):
         for t, what, host in self.plan:
             if self.stop.wait(max(0.0, self.epoch + t / self.speed - time.time())):
                 return
-            (self.net.link_down if what == "down" else self.net.link_up)(host)
-            self.done.append({"t": t, "link": what, "host": host,
+            if what == "down":
+                self.net.link_down(host)
+                counters = self.net.counters(host)
+            else:
+                counters = self.net.counters(host)
+                self.net.link_up(host)
+            self.done.append({"t": t, "link": what, "host": host, "counters": counters,
                               "at_sim_s": round((time.time() - self.epoch) * self.speed, 3)})
 
 
