@@ -14,6 +14,7 @@ from typing import Any
 from mesh_sim.targets import (
     FLAT_GROUND,
     ConstantVelocityTarget,
+    DampedVelocityTarget,
     Figure8Target,
     SingerTarget,
     StaticTarget,
@@ -34,9 +35,14 @@ _KINDS: dict[str, tuple[type, tuple[str, ...], tuple[str, ...]]] = {
         ("position", "velocity", "alpha", "sigma", "seed"),
         ("dt", "max_speed", "acceleration", "max_horizon"),
     ),
+    "damped_velocity": (
+        DampedVelocityTarget,
+        ("position", "speed_std", "tau", "seed"),
+        ("velocity", "dt", "max_horizon"),
+    ),
 }
 _VECTORS = {"position", "velocity", "center", "acceleration"}
-_POSITIVE = {"d", "omega", "alpha", "dt", "max_speed", "max_horizon"}
+_POSITIVE = {"d", "omega", "alpha", "dt", "max_speed", "max_horizon", "speed_std", "tau"}
 
 
 def _parse_field(name: str, value: Any) -> Any:
@@ -63,6 +69,8 @@ def targets_from_config(configs: Sequence[Mapping[str, Any]], terrain: Terrain |
     - ``{"kind": "figure8", "center": [n, e], "d": 20, "omega": 0.0285, "heading_deg": 0}``
     - ``{"kind": "singer", "position": [n, e], "velocity": [vn, ve], "alpha": 0.1, "sigma": 0.5,
       "seed": 3, "dt": 0.05, "max_speed": 8.0, "acceleration": [an, ae], "max_horizon": 86400}``
+    - ``{"kind": "damped_velocity", "position": [n, e], "speed_std": 1.0, "tau": 10.0, "seed": 3,
+      "velocity": [vn, ve] (default: drawn), "dt": 0.05, "max_horizon": 86400}``
 
     ``id`` defaults to ``"t<index>"`` and must be unique. Angles are degrees in the config and radians
     inside. Unknown kinds or keys, missing keys, wrong lengths and non-finite or out-of-range numbers

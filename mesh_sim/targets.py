@@ -12,6 +12,8 @@ model gives the horizontal track ``(n(t), e(t))`` and the terrain gives the heig
 * :class:`Figure8Target` — ``p(t) = c + R(ψ) d [sin(4πωt), sin(2πωt)]``, spec 004 §4.1 (Eqs. 14-15,
   closed form; the peak speed is ``2πωd √5 ≈ 8.0`` m/s for ``d = 20`` m, ``ω = 0.0285`` Hz).
 * :class:`SingerTarget` — "man-like" manoeuvring target, spec 004 §4.4 (Eqs. 16-17, Singer-type).
+* :class:`DampedVelocityTarget` — an Ornstein-Uhlenbeck velocity: the trackers' own motion model, the truth
+  a consistency (ANEES) test needs.
 
 :mod:`mesh_sim.target_set` builds them from TOML-like tables and turns them into plain data for the wire.
 """
@@ -33,6 +35,7 @@ __all__ = [
     "ConstantVelocityTarget",
     "Figure8Target",
     "SingerTarget",
+    "DampedVelocityTarget",
 ]
 
 #: The ground a target rides on when it is given no terrain: flat at 0 m.
@@ -183,8 +186,59 @@ class Figure8Target:
         return _on_terrain(self.terrain, n, e, c * vx - s * vy, s * vx + c * vy)
 
 
+class _Presimulated:
+    """A target pre-simulated on the grid ``t_k = k dt`` in chunks of ``CHUNK_SECONDS`` (chunk ``j`` draws its
+    noise from ``default_rng([seed, j])``), rows ``(n, e, vn, ve, ...)``; produced lazily as ``t`` grows, and
+    never dependent on the order of the queries, so ``state(t)`` is a pure function of ``(parameters, t)``.
+    Between grid points the velocity is linear and the position quadratic (the rows' positions integrate the
+    velocity by the trapezoid rule), so ``state(t)`` is continuous and its velocity is exactly the derivative
+    of its position. ``t`` must lie in ``[0, max_horizon]``. Not safe for concurrent first evaluation from
+    threads. A subclass gives ``_start_row()`` and ``_simulate_chunk(j, start_row)``."""
+
+    CHUNK_SECONDS = 60.0  # chosen here
+
+    @property
+    def _chunk_steps(self) -> int:
+        return max(1, round(self.CHUNK_SECONDS / self.dt))
+
+    def _ensure(self, t: float) -> None:
+        if t < 0.0 or t > self.max_horizon:
+            raise ValueError(f"target {self.id!r}: t = {t} is outside [0, max_horizon = {self.max_horizon}]")
+        need = int(t / self.dt) // self._chunk_steps
+        while len(self._chunks) <= need:
+            j = len(self._chunks)
+            start = self._start_row() if j == 0 else tuple(self._chunks[-1][-1])
+            chunk = self._simulate_chunk(j, start)
+            chunk.setflags(write=False)
+            self._chunks.append(chunk)
+
+    def _rows(self, t_end: float) -> tuple[np.ndarray, np.ndarray]:
+        """Times ``(K+1,)`` and rows ``(K+1, columns)`` of the grid up to ``t_end``."""
+        t_end = _check_time(t_end)
+        self._ensure(t_end)
+        k_end = int(math.floor(t_end / self.dt + 1e-9))
+        rows = np.concatenate([self._chunks[0]] + [c[1:] for c in self._chunks[1:]])[: k_end + 1]
+        return np.arange(k_end + 1) * self.dt, rows
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        t = _check_time(t)
+        self._ensure(t)
+        steps = self._chunk_steps
+        k = int(math.floor(t / self.dt))
+        j, i = divmod(k, steps)
+        rows = self._chunks[j]
+        s = t - (j * steps + i) * self.dt
+        (pn, pe, vn, ve), (vn1, ve1) = rows[i, :4], rows[i + 1, 2:4]
+        f = s / self.dt
+        vn_t = vn + (vn1 - vn) * f
+        ve_t = ve + (ve1 - ve) * f
+        n = pn + vn * s + 0.5 * (vn1 - vn) * s * f
+        e = pe + ve * s + 0.5 * (ve1 - ve) * s * f
+        return _on_terrain(self.terrain, float(n), float(e), float(vn_t), float(ve_t))
+
+
 @dataclass(frozen=True)
-class SingerTarget:
+class SingerTarget(_Presimulated):
     """A "man-like" manoeuvring target (spec 004 §4.4, Singer-type): per ground axis
 
         ``ȧ = -α a + w``,  stationary ``std(a) = sigma`` [m/s²]  (``E[w w'] = 2 α sigma² δ``),
@@ -196,13 +250,8 @@ class SingerTarget:
     The velocity integrates the step-mean acceleration, ``v_{k+1} = v_k + dt (a_k + a_{k+1}) / 2``,
     and is then clipped to ``|v_{k+1}| <= max_speed`` (ground speed, 8 m/s by default: the top of
     the 0-8 m/s target range of spec 004); positions follow ``p_{k+1} = p_k + dt (v_k + v_{k+1}) / 2``.
-    Between grid points the velocity is linear and the position quadratic, so ``state(t)`` is
-    continuous and its velocity is exactly the derivative of its position.
 
-    The grid is pre-simulated in chunks of ``CHUNK_SECONDS``; chunk ``j`` draws its noise from
-    ``default_rng([seed, j])``. Chunks are produced lazily as ``t`` grows, and the result never
-    depends on the order of the queries, so ``state(t)`` is a pure function of ``(parameters, t)``.
-    ``t`` must lie in ``[0, max_horizon]``. Not safe for concurrent first evaluation from threads.
+    Pre-simulated on that grid as :class:`_Presimulated` says.
 
     ``sigma`` is the RMS acceleration, not the spectral density of spec 004's ``w`` (whose σ = 0.1
     m/s³ is ambiguous there): a white ``w`` of spectral density ``q`` gives ``sigma² = q / (2α)``.
@@ -221,8 +270,6 @@ class SingerTarget:
     terrain: Terrain = field(default=FLAT_GROUND, kw_only=True)
     _chunks: list = field(init=False, repr=False, compare=False, default_factory=list)
 
-    CHUNK_SECONDS = 60.0  # chosen here
-
     def __post_init__(self):
         object.__setattr__(self, "position", _vec2(self.position, "position"))
         object.__setattr__(self, "velocity", _vec2(self.velocity, "velocity"))
@@ -239,24 +286,19 @@ class SingerTarget:
         if math.hypot(*self.velocity) > self.max_speed:
             raise ValueError(f"initial speed {math.hypot(*self.velocity):.3g} m/s exceeds max_speed {self.max_speed}")
 
-    # -- pre-simulation
+    def _start_row(self) -> tuple:
+        return (*self.position, *self.velocity, *self.acceleration)
 
-    @property
-    def _chunk_steps(self) -> int:
-        return max(1, round(self.CHUNK_SECONDS / self.dt))
-
-    def _simulate_chunk(self, j: int, p0, v0, a0) -> np.ndarray:
-        """Rows ``k = 0..K`` of ``(n, e, vn, ve, an, ae)`` from the chunk's start state."""
+    def _simulate_chunk(self, j: int, start: tuple) -> np.ndarray:
+        """Rows ``k = 0..K`` of ``(n, e, vn, ve, an, ae)`` from the chunk's start row."""
         steps = self._chunk_steps
         phi = math.exp(-self.alpha * self.dt)
         gain = self.sigma * math.sqrt(-math.expm1(-2.0 * self.alpha * self.dt))
         xi = np.random.default_rng([self.seed, j]).standard_normal((steps, 2)) * gain
         out = np.empty((steps + 1, 6))
-        pn, pe = p0
-        vn, ve = v0
-        an, ae = a0
+        pn, pe, vn, ve, an, ae = start
         vmax, half = self.max_speed, 0.5 * self.dt
-        out[0] = (pn, pe, vn, ve, an, ae)
+        out[0] = start
         for k in range(steps):
             an1 = phi * an + xi[k, 0]
             ae1 = phi * ae + xi[k, 1]
@@ -270,44 +312,67 @@ class SingerTarget:
             pe += half * (ve + ve1)
             vn, ve, an, ae = vn1, ve1, an1, ae1
             out[k + 1] = (pn, pe, vn, ve, an, ae)
-        out.setflags(write=False)
         return out
-
-    def _ensure(self, t: float) -> None:
-        if t < 0.0 or t > self.max_horizon:
-            raise ValueError(f"target {self.id!r}: t = {t} is outside [0, max_horizon = {self.max_horizon}]")
-        steps = self._chunk_steps
-        need = int(t / self.dt) // steps
-        while len(self._chunks) <= need:
-            j = len(self._chunks)
-            if j == 0:
-                start = (self.position, self.velocity, self.acceleration)
-            else:
-                last = self._chunks[-1][-1]
-                start = ((last[0], last[1]), (last[2], last[3]), (last[4], last[5]))
-            self._chunks.append(self._simulate_chunk(j, *start))
 
     def grid(self, t_end: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The pre-simulated ground grid up to ``t_end``: ``times (K+1,)``, ground positions, ground
         velocities and the Singer accelerations ``a_k`` (each ``(K+1, 2)``)."""
-        t_end = _check_time(t_end)
-        self._ensure(t_end)
-        k_end = int(math.floor(t_end / self.dt + 1e-9))
-        rows = np.concatenate([self._chunks[0]] + [c[1:] for c in self._chunks[1:]])[: k_end + 1]
-        return np.arange(k_end + 1) * self.dt, rows[:, 0:2].copy(), rows[:, 2:4].copy(), rows[:, 4:6].copy()
+        times, rows = self._rows(t_end)
+        return times, rows[:, 0:2].copy(), rows[:, 2:4].copy(), rows[:, 4:6].copy()
 
-    def state(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        t = _check_time(t)
-        self._ensure(t)
+
+@dataclass(frozen=True)
+class DampedVelocityTarget(_Presimulated):
+    """A ground target whose velocity is an Ornstein-Uhlenbeck process per ground axis — the truth the trackers'
+    ``motion = "damped"`` model (:class:`fusion.motion.DampedVelocity`) assumes:
+
+        ``dv = -v / tau dt + s dW``,  stationary ``std(v) = speed_std``  (``s² = 2 speed_std² / tau``),
+
+    sampled exactly on the grid ``t_k = k dt``: ``v_{k+1} = φ v_k + speed_std √(1 - φ²) ξ_k``, ``φ = exp(-dt /
+    tau)``, ``ξ_k ~ N(0, I₂)``; positions ``p_{k+1} = p_k + dt (v_k + v_{k+1}) / 2`` (the trapezoid's error,
+    ``O(dt²)`` per step, is ~10⁻⁵ of the motion at dt = 0.05 s, tau = 10 s). Without ``velocity`` the start
+    velocity is drawn from the stationary law ``N(0, speed_std² I₂)`` (``default_rng(seed)``), as the trackers'
+    prior says. A filter's consistency (NEES inside its χ² interval) is defined against truth drawn from its own
+    model (Bar-Shalom, Li & Kirubarajan 2001, §5.4.2): static or constant-velocity targets have a velocity the
+    model would rarely draw and leave a consistent filter's NEES far below its interval. Pre-simulated as
+    :class:`_Presimulated` says."""
+
+    position: tuple[float, float]
+    speed_std: float
+    tau: float
+    seed: int
+    velocity: tuple[float, float] | None = None
+    dt: float = 0.05  # spec 004 §3: the 0.05 s tracking time step
+    max_horizon: float = 86_400.0  # chosen here: a day of simulation time bounds the memory
+    id: str = field(default="damped", kw_only=True)
+    terrain: Terrain = field(default=FLAT_GROUND, kw_only=True)
+    _chunks: list = field(init=False, repr=False, compare=False, default_factory=list)
+
+    def __post_init__(self):
+        object.__setattr__(self, "position", _vec2(self.position, "position"))
+        for name in ("speed_std", "tau", "dt", "max_horizon"):
+            object.__setattr__(self, name, as_real(getattr(self, name), name, positive=True))
+        if isinstance(self.seed, bool) or not isinstance(self.seed, Integral) or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+        object.__setattr__(self, "seed", int(self.seed))
+        velocity = (self.speed_std * np.random.default_rng(self.seed).standard_normal(2) if self.velocity is None
+                    else self.velocity)
+        object.__setattr__(self, "velocity", _vec2(velocity, "velocity"))
+        _check_common(self)
+
+    def _start_row(self) -> tuple:
+        return (*self.position, *self.velocity)
+
+    def _simulate_chunk(self, j: int, start: tuple) -> np.ndarray:
+        """Rows ``k = 0..K`` of ``(n, e, vn, ve)`` from the chunk's start row."""
         steps = self._chunk_steps
-        k = int(math.floor(t / self.dt))
-        j, i = divmod(k, steps)
-        rows = self._chunks[j]
-        s = t - (j * steps + i) * self.dt
-        (pn, pe, vn, ve), (vn1, ve1) = rows[i, :4], rows[i + 1, 2:4]
-        f = s / self.dt
-        vn_t = vn + (vn1 - vn) * f
-        ve_t = ve + (ve1 - ve) * f
-        n = pn + vn * s + 0.5 * (vn1 - vn) * s * f
-        e = pe + ve * s + 0.5 * (ve1 - ve) * s * f
-        return _on_terrain(self.terrain, float(n), float(e), float(vn_t), float(ve_t))
+        phi = math.exp(-self.dt / self.tau)
+        gain = self.speed_std * math.sqrt(-math.expm1(-2.0 * self.dt / self.tau))
+        xi = np.random.default_rng([self.seed, j]).standard_normal((steps, 2)) * gain
+        velocity = np.empty((steps + 1, 2))
+        velocity[0] = start[2:4]
+        for k in range(steps):
+            velocity[k + 1] = phi * velocity[k] + xi[k]
+        steps_moved = 0.5 * self.dt * (velocity[:-1] + velocity[1:])
+        position = np.vstack([start[0:2], start[0:2] + np.cumsum(steps_moved, axis=0)])
+        return np.hstack([position, velocity])

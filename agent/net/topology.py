@@ -23,10 +23,10 @@ fleet talks, one per beacon period while it is silent: messages grow linearly wi
 messages an agent received per step with 20 agents).
 
 Knowledge is trusted only when it is complete: every agent that appears in a fresh report, as reporter
-or as neighbour, has a fresh report of its own. Otherwise every link is treated as possibly on a loop,
-and ``hybrid`` fuses by intersection. An edge counts if either end reports it (more edges, fewer
-bridges: the conservative side). Agents cut off by a partition stop appearing in fresh reports, so a
-partitioned component can still recognise its own tree edges.
+or as neighbour, has a report of its own — fresh, or not much older than that listing (:func:`listing_slack`).
+Otherwise every link is treated as possibly on a loop, and ``hybrid`` fuses by intersection. An edge counts if
+either end reports it (more edges, fewer bridges: the conservative side). Agents cut off by a partition stop
+appearing in fresh reports, so a partitioned component can still recognise its own tree edges.
 """
 
 from __future__ import annotations
@@ -55,6 +55,13 @@ def report_lifetime(timeout: float) -> float:
     return 2.0 * timeout + 1.0
 
 
+def listing_slack(timeout: float) -> float:
+    """How much older an agent's own report may be than the newest report that lists it as a neighbour: it is
+    listed until ``timeout`` after it was last heard, and its last report may be :data:`REFRESH_PERIOD` older
+    than that (its beliefs keep it heard between refreshes)."""
+    return timeout + REFRESH_PERIOD
+
+
 class Topology:
     def __init__(self, me: str, timeout: float = NEIGHBOUR_TIMEOUT):
         self.me = me
@@ -66,7 +73,7 @@ class Topology:
         self._sent_mine: list[str] | None = None  # our neighbours in our last message, and when we sent it
         self._sent_at = -float("inf")
         self._spoke_at = -float("inf")  # our last broadcast of any kind the peers listen to
-        self._cache: tuple | None = None  # ((version, fresh reporters, our neighbours), bridges): they change rarely
+        self._cache: tuple | None = None  # ((version, reports in use, our neighbours), bridges): they change rarely
         self._memo: tuple | None = None  # ((t, version), bridges or None when incomplete): see edge
 
     def heard(self, peer: str, t: float) -> None:
@@ -162,14 +169,32 @@ class Topology:
 
     def _bridges(self, t: float, mine: frozenset[str]) -> frozenset | None:
         """The bridges of the graph known at ``t``, or ``None`` when that knowledge is incomplete. The graph is
-        a function of the graph version, which reports are fresh and our own neighbours: it is rebuilt (O(N^2)
-        for N agents) only when one of those changes, not at every step."""
-        lifetime = report_lifetime(self.timeout)
-        fresh = frozenset(a for a, (w, _) in self._reports.items() if t - w <= lifetime)
-        key = (self._version, fresh, mine)
+        a function of the graph version, which reports are in use (:meth:`_in_use`) and our own neighbours: it
+        is rebuilt (O(N^2) for N agents) only when one of those changes, not at every step."""
+        in_use = self._in_use(t, mine)
+        key = (self._version, in_use, mine)
         if self._cache is None or self._cache[0] != key:
-            self._cache = (key, self._bridges_of({a: self._reports[a][1] for a in fresh} | {self.me: mine}))
+            self._cache = (key, self._bridges_of({a: self._reports[a][1] for a in in_use} | {self.me: mine}))
         return self._cache[1]
+
+    def _in_use(self, t: float, mine: frozenset[str]) -> frozenset[str]:
+        """The agents whose reports describe the graph at ``t``: the fresh ones, and an expired one while a fresh
+        report (or our own neighbours) lists its agent, if it is at most :func:`listing_slack` older than the
+        newest such listing. An agent's report is that much older than the last report that lists it, in the
+        worst case (it is listed until ``timeout`` after it was last heard, and reports at least every
+        :data:`REFRESH_PERIOD`), so its own report expires first: cut off together with a neighbour, it left
+        knowledge incomplete — and hybrid intersecting on links that never changed — for up to that long (on
+        ``partition``'s line, uav2 about uav0 through uav1's report, 6 s into the partition)."""
+        lifetime = report_lifetime(self.timeout)
+        fresh = {a for a, (w, _) in self._reports.items() if t - w <= lifetime}
+        listed_at = dict.fromkeys(mine, t)
+        for agent in fresh:
+            when, theirs = self._reports[agent]
+            for n in theirs:
+                listed_at[n] = max(listed_at.get(n, when), when)
+        slack = listing_slack(self.timeout)
+        return frozenset(fresh | {a for a, w in listed_at.items()
+                                  if a not in fresh and a in self._reports and self._reports[a][0] >= w - slack})
 
     @staticmethod
     def _bridges_of(reports: dict[str, frozenset[str]]) -> frozenset | None:

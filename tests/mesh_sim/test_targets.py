@@ -10,7 +10,14 @@ import numpy as np
 import pytest
 
 from mesh_sim.target_set import targets_from_config, truth_snapshot
-from mesh_sim.targets import ConstantVelocityTarget, Figure8Target, SingerTarget, StaticTarget, Target
+from mesh_sim.targets import (
+    ConstantVelocityTarget,
+    DampedVelocityTarget,
+    Figure8Target,
+    SingerTarget,
+    StaticTarget,
+    Target,
+)
 from perception.terrain import FlatTerrain, HillsTerrain
 
 HILLS = HillsTerrain(amplitude=15.0, wavelength=120.0, seed=1)
@@ -190,6 +197,62 @@ def test_singer_rejects_bad_parameters(kwargs, match):
         SingerTarget((0.0, 0.0), (1.0, 0.0), **{**base, **kwargs})
 
 
+# ------------------------------------------------------------------------------------ damped velocity
+
+
+def test_damped_velocity_target_moves_as_the_trackers_model_says():
+    """Monte Carlo over 600 targets against the closed forms of the integrated Ornstein-Uhlenbeck velocity
+    (stationary std ``sigma``, correlation time ``tau``): ``Var v = sigma²`` at every time (the start drawn from the
+    stationary law), ``Cov(v(t), v(t + h)) = sigma² e^{-h/tau}``, and the displacement over ``h``,
+    ``Var(p(h) - p(0)) = 2 sigma² tau² (h/tau - 1 + e^{-h/tau})`` (Uhlenbeck & Ornstein, Phys. Rev. 36, 1930) —
+    and the filters' own discretisation (:class:`fusion.motion.DampedVelocity`, Van Loan) predicts the same."""
+    from fusion.motion import DampedVelocity
+
+    sigma, tau, h = 1.5, 10.0, 7.0
+    runs = [DampedVelocityTarget((0.0, 0.0), sigma, tau, seed) for seed in range(600)]
+    start = np.array([r.state(0.0) for r in runs])[:, :, :2]  # (runs, position|velocity, north/east)
+    later = np.array([r.state(h) for r in runs])[:, :, :2]
+    assert np.var(start[:, 1]) == pytest.approx(sigma**2, rel=0.1)
+    assert np.var(later[:, 1]) == pytest.approx(sigma**2, rel=0.1)
+    assert np.mean(start[:, 1] * later[:, 1]) == pytest.approx(sigma**2 * math.exp(-h / tau), rel=0.15)
+    displacement = 2 * sigma**2 * tau**2 * (h / tau - 1 + math.exp(-h / tau))
+    assert np.var(later[:, 0] - start[:, 0]) == pytest.approx(displacement, rel=0.12)
+    model = DampedVelocity(spatial_dims=1, speed_std=sigma, tau=tau)
+    F, Q = model.transition(h), model.noise(h)
+    stationary = np.diag([0.0, sigma**2])
+    predicted = F @ stationary @ F.T + Q  # of (p(h) - p(0), v(h)) from p(0) = 0 and a stationary v(0)
+    assert predicted[0, 0] == pytest.approx(displacement, rel=1e-9)
+    assert predicted[1, 1] == pytest.approx(sigma**2, rel=1e-9)
+
+
+def test_damped_velocity_target_is_continuous_deterministic_and_takes_a_given_start_velocity():
+    a, b = DampedVelocityTarget((3.0, 4.0), 1.0, 10.0, 5), DampedVelocityTarget((3.0, 4.0), 1.0, 10.0, 5)
+    for t in (130.0, 0.35, 60.0):  # queried in another order than a's
+        for left, right in zip(a.state(t), b.state(t), strict=True):
+            np.testing.assert_array_equal(left, right)
+    for knot in (0.05 * 7, 60.0, 120.0):
+        for left, right in zip(a.state(knot - 1e-9), a.state(knot + 1e-9), strict=True):
+            np.testing.assert_allclose(left, right, atol=1e-6)
+    given = DampedVelocityTarget((0.0, 0.0), 1.0, 10.0, 5, velocity=(0.5, -0.25))
+    np.testing.assert_allclose(given.state(0.0)[1][:2], [0.5, -0.25])
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"speed_std": 0.0}, "speed_std"),
+    ({"tau": -1.0}, "tau"),
+    ({"tau": math.inf}, "tau"),
+    ({"seed": -3}, "seed"),
+    ({"seed": 1.5}, "seed"),
+    ({"velocity": (1.0, math.nan)}, "velocity"),
+])
+def test_damped_velocity_target_rejects_bad_parameters(kwargs, match):
+    """Bad input: a zero speed spread, a negative or infinite correlation time, a negative or fractional seed, a
+    NaN start velocity."""
+    base = {"speed_std": 1.0, "tau": 10.0, "seed": 1}
+    with pytest.raises(ValueError, match=match):
+        DampedVelocityTarget((0.0, 0.0), **{**base, **kwargs})
+
+
 # ------------------------------------------------------------------------------------ snapshot / config
 
 
@@ -212,9 +275,11 @@ def test_targets_from_config():
         {"id": "walker", "kind": "constant_velocity", "position": [0, 0], "velocity": [1, 1]},
         {"kind": "singer", "position": [1, 2], "velocity": [0.5, 0], "alpha": 0.1, "sigma": 0.5, "seed": 3},
         {"kind": "figure8", "center": [5, 5], "heading_deg": 90},
+        {"kind": "damped_velocity", "position": [3, 4], "speed_std": 1.0, "tau": 10, "seed": 2},
     ]
     targets = targets_from_config(configs, HILLS)
-    assert [t.id for t in targets] == ["t0", "t1", "walker", "t3", "t4"]
+    assert [t.id for t in targets] == ["t0", "t1", "walker", "t3", "t4", "t5"]
+    assert targets[5] == DampedVelocityTarget((3, 4), 1.0, 10.0, 2, id="t5", terrain=HILLS)
     assert targets[0] == Figure8Target((0.0, 0.0), 20.0, 0.0285, id="t0", terrain=HILLS)
     assert targets[1] == StaticTarget((10.0, -5.0), id="t1", terrain=HILLS)
     assert targets[3] == SingerTarget((1, 2), (0.5, 0), alpha=0.1, sigma=0.5, seed=3, id="t3", terrain=HILLS)

@@ -15,7 +15,14 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from agent.net import wire
-from agent.net.topology import BEACON_PERIOD, NEIGHBOUR_TIMEOUT, REFRESH_PERIOD, Topology, report_lifetime
+from agent.net.topology import (
+    BEACON_PERIOD,
+    NEIGHBOUR_TIMEOUT,
+    REFRESH_PERIOD,
+    Topology,
+    listing_slack,
+    report_lifetime,
+)
 from fusion.resync import Edge
 
 ME = "a0"
@@ -159,6 +166,32 @@ def test_report_lifetime():
     topo.heard("a1", t)
     assert topo.edge("a1", t) is Edge.UNKNOWN
     assert topo.neighbours_of("a1", t) == frozenset()
+
+
+def test_a_report_outlived_by_a_listing_of_its_agent_still_counts_within_the_slack():
+    """``partition``'s line a3 - ME - a1 - a2 cut between ME and a1 at 15 s (ME = uav2, a1 = uav1, a2 = uav0):
+    a1's last report (15 s) lists a2, whose own last report is a refresh period older (13 s). At 20.5 s a2's
+    report has expired (7 s) and a1's has not: knowledge stayed "incomplete" and hybrid intersected on ME - a3,
+    a link that never changed, until a1's report expired too. Within :func:`listing_slack` of the listing a2's
+    report still counts (a3 - ME is a bridge); older than that, it does not."""
+    lifetime = report_lifetime(NEIGHBOUR_TIMEOUT)
+    topo = Topology(ME)
+    tell(topo, {"a2": [13.0, ["a1"]], "a1": [15.0, ["a2", ME]], "a3": [20.0, [ME]]}, sender="a3", t=20.0)
+    t = 20.5
+    topo.heard("a3", t)
+    assert t - 13.0 > lifetime >= t - 15.0  # a2's report expired, a1's (which lists a2) is fresh
+    assert topo.edge("a3", t) is Edge.TREE
+    too_old = Topology(ME)
+    w = 15.0 - listing_slack(NEIGHBOUR_TIMEOUT) - 0.01
+    tell(too_old, {"a2": [w, ["a1"]], "a1": [15.0, ["a2", ME]], "a3": [20.0, [ME]]}, sender="a3", t=20.0)
+    too_old.heard("a3", t)
+    assert too_old.edge("a3", t) is Edge.UNKNOWN
+    # the listing itself expired: a1 and a2 are gone from the known graph, which is complete without them
+    later = 15.0 + lifetime + 0.01
+    for each in (topo, too_old):
+        each.heard("a3", later)
+        tell(each, {"a3": [later, [ME]]}, sender="a3", t=later)
+        assert each.edge("a3", later) is Edge.TREE
 
 
 def test_newest_report_wins():
