@@ -86,6 +86,13 @@ def as_real(
     return value
 
 
+def _seed(value: Any) -> int:
+    """A pre-simulated target's seed: a non-negative integer (not a bool); ``ValueError`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, Integral) or value < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {value!r}")
+    return int(value)
+
+
 def _check_common(target: Any) -> None:
     if not isinstance(target.id, str) or not target.id:
         raise ValueError(f"target id must be a non-empty string, got {target.id!r}")
@@ -279,9 +286,7 @@ class SingerTarget(_Presimulated):
         object.__setattr__(self, "dt", as_real(self.dt, "dt", positive=True))
         object.__setattr__(self, "max_speed", as_real(self.max_speed, "max_speed", positive=True, allow_inf=True))
         object.__setattr__(self, "max_horizon", as_real(self.max_horizon, "max_horizon", positive=True))
-        if isinstance(self.seed, bool) or not isinstance(self.seed, Integral) or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
-        object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "seed", _seed(self.seed))
         _check_common(self)
         if math.hypot(*self.velocity) > self.max_speed:
             raise ValueError(f"initial speed {math.hypot(*self.velocity):.3g} m/s exceeds max_speed {self.max_speed}")
@@ -352,9 +357,7 @@ class DampedVelocityTarget(_Presimulated):
         object.__setattr__(self, "position", _vec2(self.position, "position"))
         for name in ("speed_std", "tau", "dt", "max_horizon"):
             object.__setattr__(self, name, as_real(getattr(self, name), name, positive=True))
-        if isinstance(self.seed, bool) or not isinstance(self.seed, Integral) or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
-        object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "seed", _seed(self.seed))
         velocity = (self.speed_std * np.random.default_rng(self.seed).standard_normal(2) if self.velocity is None
                     else self.velocity)
         object.__setattr__(self, "velocity", _vec2(velocity, "velocity"))
