@@ -48,10 +48,10 @@ REFRESH_PERIOD = 2.0
 
 
 def report_lifetime(timeout: float) -> float:
-    """How long another agent's report stays fresh. It must outlive every listing of that agent as
-    someone's neighbour (a listing lasts ``timeout`` after the agent was last heard, and the report
-    itself may be one beacon period and a few relay hops older), or knowledge turns "incomplete" on links
-    that never changed."""
+    """How long another agent's report stays fresh. It must outlive every listing of that agent in a report
+    its lister keeps sending (a listing lasts ``timeout`` after the agent was last heard, and the report itself
+    may be one :data:`REFRESH_PERIOD` and a few relay hops older), or knowledge turns "incomplete" on links that
+    never changed. A lister cut off with the agent stops sending: :func:`listing_slack` covers that case."""
     return 2.0 * timeout + 1.0
 
 
@@ -132,9 +132,8 @@ class Topology:
         neighbours): it gets them at once, as OSPF neighbours exchange their databases on a new adjacency.
         Otherwise, at a partition's merge, an agent would wait for the far side's next refresh (up to
         :data:`REFRESH_PERIOD`) with knowledge incomplete, and hybrid would intersect meanwhile."""
-        lifetime = report_lifetime(self.timeout)
-        return {agent for agent, (when, theirs) in self._reports.items()
-                if t - when <= lifetime and any(n != agent and n not in theirs for n in new)}
+        return {agent for agent, (_, theirs) in self._fresh(t).items()
+                if any(n != agent and n not in theirs for n in new)}
 
     def _worth_relaying(self, agent: str, sender: str, mine: list[str], t: float) -> bool:
         """Does a neighbour of ours lack ``agent``'s report? Not if it is ``agent`` or ``sender`` or one of
@@ -185,16 +184,19 @@ class Topology:
         :data:`REFRESH_PERIOD`), so its own report expires first: cut off together with a neighbour, it left
         knowledge incomplete — and hybrid intersecting on links that never changed — for up to that long (on
         ``partition``'s line, uav2 about uav0 through uav1's report, 6 s into the partition)."""
-        lifetime = report_lifetime(self.timeout)
-        fresh = {a for a, (w, _) in self._reports.items() if t - w <= lifetime}
+        fresh = self._fresh(t)
         listed_at = dict.fromkeys(mine, t)
-        for agent in fresh:
-            when, theirs = self._reports[agent]
+        for when, theirs in fresh.values():
             for n in theirs:
                 listed_at[n] = max(listed_at.get(n, when), when)
         slack = listing_slack(self.timeout)
-        return frozenset(fresh | {a for a, w in listed_at.items()
-                                  if a not in fresh and a in self._reports and self._reports[a][0] >= w - slack})
+        return frozenset(fresh.keys() | {a for a, w in listed_at.items()
+                                         if a not in fresh and a in self._reports and self._reports[a][0] >= w - slack})
+
+    def _fresh(self, t: float) -> dict[str, tuple[float, frozenset[str]]]:
+        """The reports still fresh at ``t`` (:func:`report_lifetime`)."""
+        lifetime = report_lifetime(self.timeout)
+        return {agent: report for agent, report in self._reports.items() if t - report[0] <= lifetime}
 
     @staticmethod
     def _bridges_of(reports: dict[str, frozenset[str]]) -> frozenset | None:
