@@ -131,7 +131,8 @@ class TrackExchange:
     def outgoing(self, t: float, neighbours: list[str]) -> Outgoing | None:
         if not self.sender.due(t):
             return None
-        chosen = self.sender.choose(t, self.tracker.confirmed(), TRACK_ENTRY_BYTES, self.tracker.model.motion)
+        chosen = self.sender.choose(t, self.tracker.confirmed(), TRACK_ENTRY_BYTES, self.tracker.model.motion,
+                                    neighbours)
         if not chosen:
             return None
         tracks = [self._entry(tr) for tr in chosen]

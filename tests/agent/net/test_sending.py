@@ -152,6 +152,19 @@ def test_max_silence_resends_a_track_without_new_information():
     assert sent_at == [0.0, 3.0, 6.0, 9.0]
 
 
+def test_a_neighbour_the_last_broadcast_missed_gets_the_track_at_once():
+    """A partition's merge: ``uav2`` comes back as a neighbour of a track that has no news for the trigger (still,
+    last sent at 0 s). It is sent to the new neighbour at the next round, then waits for the trigger or
+    ``max_silence`` again; a neighbour that leaves asks for nothing."""
+    sched = SendScheduler(SendConfig(period=1.0, info_gain=0.1, max_silence=10.0), budget=None)
+    track = still_track(4)
+    assert sched.choose(0.0, [track], ENTRY, STILL, ["uav0"]) == [track]
+    assert sched.choose(1.0, [track], ENTRY, STILL, ["uav0"]) == []
+    assert sched.choose(2.0, [track], ENTRY, STILL, ["uav0", "uav2"]) == [track]  # the merge
+    assert sched.choose(3.0, [track], ENTRY, STILL, ["uav0", "uav2"]) == []
+    assert sched.choose(4.0, [track], ENTRY, STILL, ["uav2"]) == []  # uav0 gone: it needs nothing from us
+
+
 def test_an_unobservable_track_is_sent_first_then_on_silence_only():
     class Unobservable:
         id = 3
