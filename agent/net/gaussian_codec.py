@@ -11,6 +11,7 @@ semi-definite — and raises only :class:`agent.net.wire.DecodeError` (reasons `
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -20,6 +21,7 @@ from fusion.gaussian import Gaussian
 from fusion.trajectory import Trajectory, TrajectoryModel
 
 SYMMETRY_RTOL = 1e-9  # |Y - Y^T| <= SYMMETRY_RTOL * max(1, max|Y|) (chosen here)
+OVERFLOW_FREE = 1e307  # |a|, |b| below this: a - b and 0.5 (a + b) are finite (float64 max 1.8e308)
 
 
 def encode_gaussian(g: Gaussian) -> dict:
@@ -35,7 +37,7 @@ def decode_gaussian(d, dim: int | None = None) -> Gaussian:
         raise DecodeError("bad_shape", f"y has shape {y.shape}, expected ({dim if dim is not None else 'n'},)")
     if Y.shape != (y.size, y.size):
         raise DecodeError("bad_shape", f"Y has shape {Y.shape}, expected {(y.size, y.size)}")
-    _check_finite(y, Y)
+    _finite_scale(y)
     return Gaussian(y, _information_matrix(Y))
 
 
@@ -56,18 +58,19 @@ def encode_trajectory(t: Trajectory) -> dict:
     where ``off[k]`` is the block at (state k+1, state k), below the diagonal. Raises ``ValueError``
     if the matrix is not block-tridiagonal (a defect upstream: it would be silently truncated)."""
     n, L = t.model.state_dim, t.model.window
-    Y = np.asarray(t.Y, dtype=np.float64)
-    outside, k = _band(L, n)
-    if outside.any() and np.abs(Y[outside]).max() > 1e-12 * max(1.0, float(np.abs(Y).max())):
+    Y = np.ascontiguousarray(t.Y, dtype=np.float64).ravel()
+    band, outside = _band_positions(L, n)
+    stray = float(np.abs(Y[outside]).max(initial=0.0))
+    if stray and stray > 1e-12 * max(1.0, float(np.abs(Y).max())):
         raise ValueError("trajectory information matrix is not block-tridiagonal")
-    blocks = Y.reshape(L, n, L, n)  # blocks[i, :, j, :] = Y[i*n:(i+1)*n, j*n:(j+1)*n]
+    blocks = Y[band[:(2 * L - 1) * n * n]]  # diag, then off: the layout _band_positions documents
     return {
         "epoch": int(t.epoch),
         "n": n,
         "L": L,
         "y": np.asarray(t.y, dtype=np.float64),
-        "diag": blocks[k, :, k, :],
-        "off": blocks[k[1:], :, k[:-1], :],
+        "diag": blocks[:L * n * n].reshape(L, n, n),
+        "off": blocks[L * n * n:].reshape(L - 1, n, n),
     }
 
 
@@ -83,27 +86,28 @@ def decode_trajectory(d, model: TrajectoryModel) -> Trajectory:
     y, diag, off = (_float_array(d[k], k) for k in ("y", "diag", "off"))
     if y.shape != (L * n,) or diag.shape != (L, n, n) or off.shape != (L - 1, n, n):
         raise DecodeError("bad_shape", f"y {y.shape}, diag {diag.shape}, off {off.shape} for n={n}, L={L}")
-    _check_finite(y, diag, off)
-    with np.errstate(all="ignore"):  # only the diagonal blocks can be asymmetric: the band is mirrored below
-        scale = max(1.0, float(np.abs(diag).max()), float(np.abs(off).max()) if off.size else 0.0)
-        if float(np.abs(diag - diag.transpose(0, 2, 1)).max()) > SYMMETRY_RTOL * scale:
-            raise DecodeError("indefinite", "information matrix is not symmetric")
-    _, k = _band(L, n)
-    blocks = np.zeros((L, n, L, n))  # blocks[i, :, j, :] = Y[i*n:(i+1)*n, j*n:(j+1)*n]
-    blocks[k, :, k, :] = 0.5 * (diag + diag.transpose(0, 2, 1))
-    blocks[k[1:], :, k[:-1], :] = off
-    blocks[k[:-1], :, k[1:], :] = off.transpose(0, 2, 1)
-    Y = blocks.reshape(L * n, L * n)
+    scale = _finite_scale(y, diag, off)
+    diag_t = diag.transpose(0, 2, 1)
+    if _asymmetry(diag, diag_t, scale) > SYMMETRY_RTOL * scale:  # only the diagonal blocks can be asymmetric:
+        raise DecodeError("indefinite", "information matrix is not symmetric")  # the band is mirrored below
+    Y = np.zeros(L * n * L * n)
+    Y[_band_positions(L, n)[0]] = np.concatenate((0.5 * (diag + diag_t), off, off.transpose(0, 2, 1)), axis=None)
+    Y = Y.reshape(L * n, L * n)
     _require_psd(Y)
     return Trajectory(y, Y, d["epoch"], model)
 
 
 @functools.cache
-def _band(L: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The entries of an ``L x L`` block matrix of ``n x n`` blocks outside its tridiagonal band (a mask), and
-    the block indices ``0..L-1``."""
-    block = np.arange(L * n) // n
-    return np.abs(block[:, None] - block[None, :]) > 1, np.arange(L)
+def _band_positions(L: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Flat positions in the ``(L n) x (L n)`` matrix of ``L x L`` blocks of ``n x n``: first those of the band —
+    the entries of ``diag`` ``(L, n, n)``, then of ``off`` ``(L - 1, n, n)`` (block (k+1, k)), then of ``off``
+    transposed (block (k, k+1)), each in C order, so that one integer gather or scatter moves them all — and then
+    those outside the band."""
+    k, i, j = np.meshgrid(np.arange(L), np.arange(n), np.arange(n), indexing="ij")
+    rows = np.concatenate((k * n + i, (k[:-1] + 1) * n + i[:-1], k[:-1] * n + i[:-1]), axis=None)
+    cols = np.concatenate((k * n + j, k[:-1] * n + j[:-1], (k[:-1] + 1) * n + j[:-1]), axis=None)
+    band = rows * L * n + cols
+    return band, np.setdiff1d(np.arange((L * n) ** 2), band)
 
 
 def _expect_keys(d, keys: set[str]) -> None:
@@ -114,26 +118,36 @@ def _expect_keys(d, keys: set[str]) -> None:
 
 
 def _float_array(value, name: str) -> np.ndarray:
+    """A float array as float64 (the wire's decoder built it: no copy when it already is)."""
     if not isinstance(value, np.ndarray) or value.dtype.kind != "f":
         raise DecodeError("bad_type", f"{name} must be a float array")
-    return value.astype(np.float64)
+    return value.astype(np.float64, copy=False)
 
 
-def _check_finite(*arrays: np.ndarray) -> None:
-    """One reduction per array: a sum is finite when every term is (a non-finite sum of finite terms, an
-    overflow, is looked at element by element)."""
+def _finite_scale(*arrays: np.ndarray) -> float:
+    """``max(1, max |a|)`` over the arrays, which must hold only finite values: the maximum of the magnitudes is
+    NaN when one is NaN and infinite when one is, so one reduction judges both."""
+    peak = float(np.abs(np.concatenate(arrays, axis=None)).max(initial=0.0))
+    if not math.isfinite(peak):
+        raise DecodeError("non_finite", "NaN or inf in a belief")
+    return max(1.0, peak)
+
+
+def _asymmetry(A: np.ndarray, B: np.ndarray, scale: float) -> float:
+    """``max |A - B|`` for finite arrays whose entries are at most ``scale`` in magnitude: the difference cannot
+    overflow below ``OVERFLOW_FREE``; above it (a hostile message) it is taken with floating-point errors
+    silenced (an overflow is ``inf``, an asymmetry)."""
+    if scale < OVERFLOW_FREE:
+        return float(np.abs(A - B).max())
     with np.errstate(all="ignore"):
-        if all(np.isfinite(a.sum()) or np.isfinite(a).all() for a in arrays):
-            return
-    raise DecodeError("non_finite", "NaN or inf in a belief")
+        return float(np.abs(A - B).max())
 
 
 def _information_matrix(Y: np.ndarray) -> np.ndarray:
-    """Symmetric to SYMMETRY_RTOL and PSD; returned exactly symmetric. ``Y`` holds finite values."""
-    with np.errstate(all="ignore"):
-        scale = max(1.0, float(np.abs(Y).max()))
-        if float(np.abs(Y - Y.T).max()) > SYMMETRY_RTOL * scale:
-            raise DecodeError("indefinite", "information matrix is not symmetric")
+    """Finite, symmetric to SYMMETRY_RTOL and PSD; returned exactly symmetric."""
+    scale = _finite_scale(Y)
+    if _asymmetry(Y, Y.T, scale) > SYMMETRY_RTOL * scale:
+        raise DecodeError("indefinite", "information matrix is not symmetric")
     Y = 0.5 * (Y + Y.T)
     _require_psd(Y)
     return Y

@@ -35,6 +35,7 @@ Every defect found in received bytes raises :class:`DecodeError` with ``reason``
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import hmac
 import math
@@ -459,13 +460,20 @@ def _enc_hook(obj):
 
 
 def _pack_array(arr: np.ndarray) -> bytes:
-    dtype = arr.dtype.newbyteorder("<")
-    if dtype.str not in ALLOWED_DTYPES:
-        raise TypeError(f"array dtype {arr.dtype} is not allowed on the wire ({sorted(ALLOWED_DTYPES)})")
-    if arr.ndim > MAX_NDIM or arr.size > MAX_ARRAY_ELEMENTS or any(d >= 1 << 32 for d in arr.shape):
-        raise ValueError(f"array of shape {arr.shape} is too large for the wire")
-    header = dtype.str.encode("ascii") + struct.pack(f"<B{arr.ndim}I", arr.ndim, *arr.shape)
+    header, dtype = _array_header(arr.dtype, arr.shape)
     return header + arr.astype(dtype, copy=False).tobytes(order="C")
+
+
+@functools.lru_cache(maxsize=256)
+def _array_header(dtype: np.dtype, shape: tuple[int, ...]) -> tuple[bytes, np.dtype]:
+    """The ext payload's header for arrays of ``dtype`` and ``shape`` (dtype string, ndim, dims as uint32
+    little-endian) and the little-endian dtype the values travel in; a message repeats a few shapes."""
+    dtype = dtype.newbyteorder("<")
+    if dtype.str not in ALLOWED_DTYPES:
+        raise TypeError(f"array dtype {dtype} is not allowed on the wire ({sorted(ALLOWED_DTYPES)})")
+    if len(shape) > MAX_NDIM or math.prod(shape) > MAX_ARRAY_ELEMENTS or any(d >= 1 << 32 for d in shape):
+        raise ValueError(f"array of shape {shape} is too large for the wire")
+    return dtype.str.encode("ascii") + struct.pack(f"<B{len(shape)}I", len(shape), *shape), dtype
 
 
 def _ext_hook(code: int, data) -> np.ndarray:

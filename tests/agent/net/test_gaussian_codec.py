@@ -169,6 +169,25 @@ def test_nan_in_a_trajectory_array_is_non_finite(key):
     assert payload_reason(decode_trajectory, d, MODEL) == "non_finite"
 
 
+@pytest.mark.parametrize("value", [math.inf, -math.inf])
+@pytest.mark.parametrize("key", ["y", "diag", "off"])
+def test_an_infinity_in_a_trajectory_array_is_non_finite(key, value):
+    d = _trajectory_payload()
+    d[key] = d[key].copy()
+    d[key].flat[0] = value
+    assert payload_reason(decode_trajectory, d, MODEL) == "non_finite"
+
+
+def test_a_trajectory_near_the_float_limit_is_rejected_quietly():
+    """A diagonal block holding +-1.7e308 across its diagonal: the asymmetry overflows, and must give a DecodeError,
+    not a floating-point warning."""
+    d = _trajectory_payload()
+    d["diag"] = d["diag"].copy()
+    d["diag"][1, 0, 1], d["diag"][1, 1, 0] = 1.7e308, -1.7e308
+    with np.errstate(all="raise"):
+        assert payload_reason(decode_trajectory, d, MODEL) == "indefinite"
+
+
 def test_an_asymmetric_diagonal_block_is_indefinite():
     d = _trajectory_payload()
     d["diag"] = d["diag"].copy()
