@@ -12,10 +12,10 @@
   bearings only replace the process noise — so such tracks waited ``max_silence`` while the receivers'
   predictions went stale (issue 16: hybrid at 1.4x the in-flight oracle on a 4-agent line).
 * **Budget.** A sender never exceeds its link budget (the tightest rate of its outgoing links, from the
-  radio plan): a token bucket at the sender admits each message; tracks are offered by priority
-  (never sent first, then largest gain) and the ones that do not fit are left for a later round —
-  thinned, never queued without bound. Telemetry passes the same bucket first (it is small and
-  carries the topology reports).
+  radio plan, or ``[sending] rate`` where that is tighter or there is no emulated radio): a token bucket
+  at the sender admits each message; tracks are offered by priority (never sent first, then largest gain)
+  and the ones that do not fit are left for a later round — thinned, never queued without bound. Telemetry
+  passes the same bucket first (it is small and carries the topology reports).
 """
 
 from __future__ import annotations
@@ -42,6 +42,11 @@ class SendConfig:
     #: s: flood policy, acknowledgements with nothing else to send wait this long for more to join them
     #: (:mod:`agent.net.flood_relay`); chosen here: one step at 5 Hz
     ack_delay: float = 0.2
+    #: bytes/s: the radio's capacity where no emulated radio gives it (a real network: the agents cannot see
+    #: the kernel's or the modem's limit, only be told it); the budget is the tighter of this and the radio
+    #: plan's. 0: the radio plan's alone (none without a plan)
+    rate: float = 0.0
+    burst: float = 0.0  #: bytes: the depth of the sender's bucket; 0: the links' default (link_plan.default_burst)
 
     def __post_init__(self):
         for name in ("period", "max_silence", "ack_timeout"):
@@ -52,6 +57,16 @@ class SendConfig:
                              f"got {self.ack_delay!r}")
         if not (np.isfinite(self.info_gain) and self.info_gain >= 0):
             raise ValueError(f"sending.info_gain must be non-negative, got {self.info_gain!r}")
+        if isinstance(self.rate, bool) or not (np.isfinite(self.rate) and self.rate >= 0):
+            raise ValueError(f"sending.rate must be bytes per second >= 0 (0: the radio plan's), got {self.rate!r}")
+        if isinstance(self.burst, bool) or not (np.isfinite(self.burst) and self.burst >= 0):
+            raise ValueError(f"sending.burst must be bytes >= 0 (0: the links' default), got {self.burst!r}")
+
+    def budget(self, planned: float | None) -> float | None:
+        """The sender's rate (bytes/s): the tighter of ``rate`` and the radio plan's ``planned`` (``None``:
+        unlimited)."""
+        rates = [r for r in (planned, self.rate or None) if r is not None]
+        return min(rates) if rates else None
 
 
 class Every:
@@ -102,7 +117,7 @@ def _propagation(motion, dt: float) -> tuple[np.ndarray, np.ndarray]:
 class SendScheduler:
     def __init__(self, config: SendConfig, budget: float | None, burst: float | None = None):
         self.config = config
-        self.bucket = None if budget is None else TokenBucket(budget, burst or default_burst(budget))
+        self.bucket = None if budget is None else TokenBucket(budget, burst or config.burst or default_burst(budget))
         self.timer = Every(config.period)
         #: track id -> (time, mean, cov, the neighbours it reached) when last sent (mean, cov None: unobservable)
         self._sent: dict[int, tuple] = {}

@@ -296,6 +296,7 @@ def test_default_burst_is_the_links():
     assert SendScheduler(SendConfig(), budget=1000.0).bucket.burst == 64 * 1024
     assert SendScheduler(SendConfig(), budget=1e7).bucket.burst == pytest.approx(1e6)
     assert SendScheduler(SendConfig(), budget=1000.0, burst=5000.0).bucket.burst == 5000.0
+    assert SendScheduler(SendConfig(burst=3000.0), budget=1000.0).bucket.burst == 3000.0  # [sending] burst
 
 
 # ---- configuration -----------------------------------------------------------------------------------
@@ -316,6 +317,12 @@ def test_default_burst_is_the_links():
         ({"ack_delay": 1.0, "ack_timeout": 0.8}, "sending.ack_delay must be in"),  # longer than the timeout
         ({"ack_delay": -0.2}, "sending.ack_delay must be in"),
         ({"ack_delay": math.nan}, "sending.ack_delay must be in"),
+        ({"rate": -1.0}, "sending.rate must be bytes per second >= 0"),
+        ({"rate": math.nan}, "sending.rate must be bytes per second >= 0"),
+        ({"rate": math.inf}, "sending.rate must be bytes per second >= 0"),  # unlimited is 0, not inf
+        ({"rate": True}, "sending.rate must be bytes per second >= 0"),
+        ({"burst": -1.0}, "sending.burst must be bytes >= 0"),
+        ({"burst": math.inf}, "sending.burst must be bytes >= 0"),
     ],
 )
 def test_bad_config(kwargs, message):
@@ -325,3 +332,14 @@ def test_bad_config(kwargs, message):
 
 def test_zero_info_gain_is_allowed():
     assert SendConfig(info_gain=0.0).info_gain == 0.0
+
+
+@pytest.mark.parametrize(("rate", "planned", "budget"), [
+    (0.0, None, None),  # no radio plan, no rate: unlimited
+    (0.0, 5e5, 5e5),  # the emulated radio's
+    (2000.0, None, 2000.0),  # a real network: only what the agents are told
+    (2000.0, 5e5, 2000.0),  # the tighter wins either way
+    (5e6, 5e5, 5e5),
+])
+def test_the_budget_is_the_tighter_of_the_rate_and_the_radio_plans(rate, planned, budget):
+    assert SendConfig(rate=rate).budget(planned) == budget
