@@ -15,7 +15,8 @@
   opens its router from a Zenoh JSON5 file (``mesh_sim.run_router``). A completed run whose agents missed more than
   1 % of their deadlines or whose video source failed ends "completed with warnings" (``mesh_sim.run_health``);
   a bad ``--duration``, ``--loss``, ... names the flag (``mesh_sim.run_overrides``);
-* ``skymesh testbed [the options of run] [--link-down T:uavK[:T_UP] ...] [--tbf-rate BYTES_PER_S]`` — the run
+* ``skymesh testbed [the options of run] [--link-down T:uavK[:T_UP] ...] [--tbf-rate BYTES_PER_S]
+  [--tbf-burst BYTES] [--router-link tcp|udp]`` — the run
   across hosts on this machine: a Linux network namespace and a Zenoh router per agent (``mesh_sim.testbed``;
   root; not with ``--lockstep``, ``--zenoh-config`` or ``--vehicle mavlink``); a link taken down and up mid-run,
   the kernel's rate cap on every UAV host; ``testbed.json`` in the run folder;
@@ -137,6 +138,11 @@ def build_parser() -> argparse.ArgumentParser:
                          help="set host uavK's network link down at simulation time T (and up at T_UP); repeatable")
     testbed.add_argument("--tbf-rate", type=float, metavar="BYTES_PER_S",
                          help="cap what every UAV host sends with the kernel's token bucket (tc tbf)")
+    testbed.add_argument("--tbf-burst", type=float, metavar="BYTES",
+                         help="the token bucket's depth (default: 1/50 s of --tbf-rate, at least 4096)")
+    testbed.add_argument("--router-link", choices=("tcp", "udp"), default="tcp",
+                         help="the transport between the hosts' routers (udp: what the network drops is lost, "
+                              "not retransmitted)")
 
     stress = commands.add_parser("stress", help="bandwidth and topology stress (= skymesh bench stress)",
                                  description="Live runs under topology churn with a shrinking bandwidth cap.")
@@ -266,7 +272,7 @@ def _run(args) -> int:
                     if args.zenoh_config:
                         raise ValueError("--zenoh-config is for skymesh run: the test bed opens a router per host")
                     outcome = run_testbed(scenario, run_dir, [LinkDown.parse(spec) for spec in args.link_down],
-                                          args.tbf_rate, **options)
+                                          args.tbf_rate, args.tbf_burst, args.router_link, **options)
                 else:
                     outcome = Launcher(scenario, run_dir, zenoh_config=args.zenoh_config, **options).run()
                 metrics = outcome.metrics

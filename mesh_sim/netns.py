@@ -135,14 +135,16 @@ class Network:
         host = self.host(name)
         run("ip", "-n", host.netns, "link", "set", host.veth, "up")
 
-    def cap_rate(self, name: str, bytes_per_s: float) -> None:
+    def cap_rate(self, name: str, bytes_per_s: float, burst: float | None = None) -> None:
         """Cap what host ``name`` sends at ``bytes_per_s`` with a token bucket (``tc qdisc replace ... tbf``:
-        rate in bit/s, burst max(:data:`TBF_MIN_BURST`, 1/50 s of the rate), packets older than
-        :data:`TBF_LATENCY_MS` dropped)."""
+        rate in bit/s, ``burst`` bytes deep — by default 1/50 s of the rate — and at least :data:`TBF_MIN_BURST`,
+        packets older than :data:`TBF_LATENCY_MS` dropped)."""
         if not bytes_per_s > 0:
             raise ValueError(f"a rate cap must be positive bytes per second, got {bytes_per_s}")
+        if burst is not None and not burst > 0:
+            raise ValueError(f"a rate cap's burst must be positive bytes, got {burst}")
         host = self.host(name)
-        burst = max(TBF_MIN_BURST, int(bytes_per_s / 50))
+        burst = max(TBF_MIN_BURST, int(bytes_per_s / 50 if burst is None else burst))
         run("tc", "-n", host.netns, "qdisc", "replace", "dev", host.veth, "root", "tbf",
             "rate", f"{int(bytes_per_s * 8)}bit", "burst", str(burst), "latency", f"{TBF_LATENCY_MS}ms")
 

@@ -18,7 +18,9 @@ of :func:`bytes_check`.
 
 Impairments are the kernel's: ``--link-down T:uavK[:T_UP]`` sets host K's veth down at simulation time T (and
 up at T_UP), ``--tbf-rate BYTES_PER_S`` caps what every UAV host sends with ``tc ... tbf`` (not the ground: the
-world's truth and the observer are the simulation's, not radio traffic). (This kernel family may
+world's truth and the observer are the simulation's, not radio traffic; ``--tbf-burst BYTES``: the bucket's depth).
+``--router-link udp`` links the routers with Zenoh's datagram links instead of TCP: what the network drops is lost,
+as on the emulated radio, instead of retransmitted behind a stalled stream. (This kernel family may
 lack ``netem``; delay and loss stay the emulated radio's.)
 """
 
@@ -41,7 +43,9 @@ ROUTER_PORT = 7447  # Zenoh's default, in every namespace: each host has its own
 ROUTER_READY_S = 60.0  # wall seconds for a host's router to listen (python and zenoh imports on a loaded machine)
 LEASE_MS = 3000  # Zenoh lease between routers: a link that is down is noticed within 3 s (default 10 s); chosen
 GROUND = "ground"
-FRAME_HEADER = 14 + 20 + 32  # bytes: Ethernet, IPv4 and TCP with the timestamp option (Linux's default)
+#: the transport between the hosts' routers -> the headers of one frame on a veth: Ethernet 14, IPv4 20, and TCP with
+#: the timestamp option (Linux's default) 32 or UDP 8 bytes
+FRAME_HEADERS = {"tcp": 14 + 20 + 32, "udp": 14 + 20 + 8}
 TESTBED_FILE = "testbed.json"
 
 
@@ -68,17 +72,19 @@ class LinkDown:
         return event
 
 
-def router_config(host: netns.Host, connect: list[netns.Host]) -> dict:
-    """A host's Zenoh router: listens on loopback (its own clients, which keep it when the link is down) and on
-    its bridge address (the other routers); connects to the routers ``connect``; no scouting, no gossip (every
-    link is configured); the lease :data:`LEASE_MS`; and no shared memory: Zenoh (1.x, by default) hands a message
-    of 3 kB or more to a peer on the same machine as a reference into ``/dev/shm``, which network namespaces do not
-    separate, so the bytes would not cross the veths (measured on the ``partition`` scenario, whose tracks are
-    ~5 kB: a host's kernel tx was 0.16 × the expectation of :func:`bytes_check` with it, 1.0 × without)."""
+def router_config(host: netns.Host, connect: list[netns.Host], link: str = "tcp") -> dict:
+    """A host's Zenoh router: listens on loopback (its own clients, which keep it when the link is down; TCP) and
+    on its bridge address (the other routers, over ``link``: ``tcp``, or ``udp``, Zenoh's datagram links, which
+    lose what the network drops instead of retransmitting it); connects to the routers ``connect``; no scouting,
+    no gossip (every link is configured); the lease :data:`LEASE_MS`; and no shared memory: Zenoh (1.x, by
+    default) hands a message of 3 kB or more to a peer on the same machine as a reference into ``/dev/shm``,
+    which network namespaces do not separate, so the bytes would not cross the veths (measured on the
+    ``partition`` scenario, whose tracks are ~5 kB: a host's kernel tx was 0.16 × the expectation of
+    :func:`bytes_check` with it, 1.0 × without)."""
     return {
         "mode": "router",
-        "listen": {"endpoints": [f"tcp/127.0.0.1:{ROUTER_PORT}", f"tcp/{host.address}:{ROUTER_PORT}"]},
-        "connect": {"endpoints": [f"tcp/{other.address}:{ROUTER_PORT}" for other in connect]},
+        "listen": {"endpoints": [f"tcp/127.0.0.1:{ROUTER_PORT}", f"{link}/{host.address}:{ROUTER_PORT}"]},
+        "connect": {"endpoints": [f"{link}/{other.address}:{ROUTER_PORT}" for other in connect]},
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
         "transport": {"link": {"tx": {"lease": LEASE_MS, "keep_alive": KEEP_ALIVE}},
                       "shared_memory": {"enabled": False}},
@@ -88,13 +94,13 @@ def router_config(host: netns.Host, connect: list[netns.Host]) -> dict:
 class Routers:
     """One ``python -m mesh_sim router`` per host, in its namespace; :meth:`close` stops them by PID."""
 
-    def __init__(self, net: netns.Network, folder: Path, env: dict):
+    def __init__(self, net: netns.Network, folder: Path, env: dict, link: str = "tcp"):
         self.processes: list[subprocess.Popen] = []
         hosts = list(net.hosts.values())
         try:
             for i, host in enumerate(hosts):
                 config = folder / f"router-{host.name}.json5"
-                write_json(config, router_config(host, hosts[:i]))
+                write_json(config, router_config(host, hosts[:i], link))
                 with open(folder / "logs" / f"router-{host.name}.log", "wb") as log:
                     self.processes.append(subprocess.Popen(
                         [*net.exec_prefix(host.name), sys.executable, "-m", "mesh_sim", "router", "--config",
@@ -149,17 +155,19 @@ class LinkEvents(threading.Thread):
 class TestbedLauncher(Launcher):
     """:class:`Launcher` with each child in its host's namespace, a client of its host's router."""
 
-    def __init__(self, net: netns.Network, *args, link_down: list[LinkDown] = (), **kwargs):
+    def __init__(self, net: netns.Network, *args, link_down: list[LinkDown] = (), router_link: str = "tcp",
+                 **kwargs):
         super().__init__(*args, **kwargs)
         if self.vehicle != "kinematic":
             raise ValueError("skymesh testbed flies the kinematic models (the autopilots talk MAVLink on loopback)")
         self.net = net
         self.link_down = list(link_down)
+        self.router_link = router_link
         self.events: LinkEvents | None = None
         self.at_epoch: dict[str, dict[str, int]] = {}  # each host's counters at simulation time 0
 
     def _open_router(self) -> tuple[Routers, str]:
-        return Routers(self.net, self.run_dir, self.env), f"tcp/127.0.0.1:{ROUTER_PORT}"
+        return Routers(self.net, self.run_dir, self.env, self.router_link), f"tcp/127.0.0.1:{ROUTER_PORT}"
 
     def _command(self, name: str, role: str, args: list[str]) -> list[str]:
         return [*self.net.exec_prefix(name if role == "agent" else GROUND), sys.executable, *args]
@@ -173,26 +181,26 @@ class TestbedLauncher(Launcher):
         return epoch
 
 
-def bytes_check(agent: dict, sent: dict[str, int], peers: int, observer: bool) -> dict:
+def bytes_check(agent: dict, sent: dict[str, int], peers: int, observer: bool, link: str = "tcp") -> dict:
     """What host ``uavK`` sent on its veth during the run (``sent``: the counters' growth from simulation time 0
     to the end) against what its agent says it sent, made comparable.
 
-    A router forwards a message once to each remote router with a subscriber for it, over TCP: a belief crosses
+    A router forwards a message once to each remote router with a subscriber for it (over ``link``): a belief crosses
     the veth once per other UAV host (``peers``) and once more for the ground's observer when it runs; a topology
     report once per other UAV host; telemetry and simulation data (the world subscribes) once. So the fair
     expectation is ``E = beliefs × (peers + observer) + topology × peers + telemetry + simulation`` (the agent's
     own counts: ``bytes_tx_by_kind``, ``sim_bytes_tx_by_kind``), and ``ratio = kernel tx ÷ E``: above 1 by the
-    framing (Ethernet 14 + IP 20 + TCP 32 bytes per segment, Zenoh's batch and message headers), the TCP
+    framing (Ethernet 14 + IP 20 + TCP 32 or UDP 8 bytes per frame, Zenoh's batch and message headers), TCP's
     acknowledgements of what the host receives, and Zenoh's own traffic (keep-alives, declarations,
-    liveliness). ``payload_ratio`` takes the frame headers out — every frame on the veth is TCP over IPv4
-    (:data:`FRAME_HEADER` bytes with TCP timestamps), and a pure acknowledgement is nothing but headers — so
-    that ``payload_ratio - 1`` is Zenoh's own share: ``(kernel tx - FRAME_HEADER × tx packets) ÷ E``."""
+    liveliness). ``payload_ratio`` takes the frame headers out — every frame on the veth is ``link`` over IPv4
+    (:data:`FRAME_HEADERS`), and a pure acknowledgement is nothing but headers — so that ``payload_ratio - 1``
+    is Zenoh's own share: ``(kernel tx - FRAME_HEADERS[link] × tx packets) ÷ E``."""
     by_kind = agent.get("bytes_tx_by_kind", {})
     telemetry, topology = by_kind.get("telemetry", 0), by_kind.get("topology", 0)
     beliefs = sum(by_kind.values()) - telemetry - topology
     simulation = sum(agent.get("sim_bytes_tx_by_kind", {}).values())
     expected = beliefs * (peers + observer) + topology * peers + telemetry + simulation
-    payload = sent["tx_bytes"] - FRAME_HEADER * sent["tx_packets"]
+    payload = sent["tx_bytes"] - FRAME_HEADERS[link] * sent["tx_packets"]
     return {"agent_bytes_tx": int(sum(by_kind.values())), "agent_sim_bytes_tx": int(simulation), "peers": peers,
             "unfanned_tx": int(telemetry + simulation),  # what only the ground's router receives
             "observer": observer, "expected_tx": int(expected), "kernel_tx": sent["tx_bytes"],
@@ -201,13 +209,17 @@ def bytes_check(agent: dict, sent: dict[str, int], peers: int, observer: bool) -
 
 
 def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rate: float | None = None,
-                **launcher) -> RunOutcome:
+                tbf_burst: float | None = None, router_link: str = "tcp", **launcher) -> RunOutcome:
     """``skymesh testbed``: the hosts made, the run, ``testbed.json`` written, the hosts removed (also on failure,
     Ctrl-C or SIGTERM). ``ValueError`` for bad settings, ``OSError`` when namespaces cannot be made here."""
-    if (why := netns.unavailable()) is not None:
-        raise OSError(f"no namespace test bed here: {why}")
+    if router_link not in FRAME_HEADERS:
+        raise ValueError(f"--router-link must be one of {sorted(FRAME_HEADERS)}, got {router_link!r}")
     if tbf_rate is not None and not tbf_rate > 0:
         raise ValueError(f"--tbf-rate must be positive bytes per second, got {tbf_rate:g}")
+    if tbf_burst is not None and (tbf_rate is None or not tbf_burst > 0):
+        raise ValueError(f"--tbf-burst must be positive bytes, with --tbf-rate; got {tbf_burst:g}")
+    if (why := netns.unavailable()) is not None:
+        raise OSError(f"no namespace test bed here: {why}")
     names = [f"uav{i}" for i in range(scenario.agent.agents)]
     for event in link_down:
         if event.host not in names:
@@ -216,8 +228,8 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
         with _sigterm_raises(), netns.network([GROUND, *names]) as net:  # SIGTERM while setting up: removed too
             if tbf_rate is not None:  # the UAVs' radios: the ground's traffic is the simulation's, not radio
                 for name in names:
-                    net.cap_rate(name, tbf_rate)
-            bed = TestbedLauncher(net, scenario, run_dir, link_down=link_down, **launcher)
+                    net.cap_rate(name, tbf_rate, tbf_burst)
+            bed = TestbedLauncher(net, scenario, run_dir, link_down=link_down, router_link=router_link, **launcher)
             try:
                 outcome = bed.run()
             finally:
@@ -235,8 +247,10 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
         "hosts": {host.name: {"address": host.address, "at_end": counters[host.name],
                               "at_epoch": bed.at_epoch.get(host.name)} for host in net.hosts.values()},
         "tbf_rate": tbf_rate,
+        "tbf_burst": tbf_burst,
+        "router_link": router_link,
         "link_events": bed.events.done if bed.events is not None else [],
-        "bytes": {name: bytes_check(agents[name], sent[name], len(names) - 1, bed.rerun != "off")
+        "bytes": {name: bytes_check(agents[name], sent[name], len(names) - 1, bed.rerun != "off", router_link)
                   for name in names if "bytes_tx_by_kind" in agents.get(name, {})},
     })
     return outcome

@@ -4,33 +4,37 @@ by the radio against the kernel's.
 Live runs of the default scenario with the geometric bearing sensor (the network is under test, not
 perception; the camera's rendering does not fit 8 agents and 9 routers on a shared 2-core machine), one seed,
 Rerun off; ``--quick``: the first two for 8 s with 4 agents (each live run is ~20 s of start-up on a loaded
-machine), full: all four for 40 s with 8 agents:
+machine), full: all six for 40 s with 8 agents:
 
 * **single host** — ``skymesh run``: one Zenoh router on loopback, every process its client. The baseline.
-* **testbed** — ``skymesh testbed`` (:mod:`mesh_sim.testbed`): a namespace, a veth and a router per agent.
+* **testbed** — ``skymesh testbed`` (:mod:`mesh_sim.testbed`): a namespace, a veth and a router per agent, the
+  routers linked over TCP.
 * **radio cap** — single host, the emulated radio's ``rate`` = :data:`LINK_CAP` bytes/s per directed link
   (bucket depth ``skymesh bench stress``'s ``BURST_S`` s of it, so that it binds within a run; without stress's
   16 KiB floor, which is for multi-track channel-filter messages: flooded bearings and bids stay far below it).
-* **tbf cap** — the testbed with the same cap in the kernel: a ``tbf`` qdisc on every UAV host's veth at
-  ``(LINK_CAP × (N − 1) + u) × k``: the N − 1 links a host's router sends a belief on, plus ``u``, the bytes per
-  second only the ground receives (telemetry, the simulation's data: not capped by the emulated radio), ``k`` the
-  kernel bytes per byte of agent accounting (``ratio`` of :func:`mesh_sim.testbed.bytes_check`: framing,
-  acknowledgements, Zenoh's own traffic); ``u`` and ``k`` measured by the uncapped testbed run of the same
-  invocation. The agents are told the cap as a deployment would tell them its radio's, ``[sending] rate`` =
-  :data:`LINK_CAP` (:class:`agent.net.sending.SendConfig`): the sender budget the emulated radio's plan gives the
-  radio-capped agents. Not told, they sent what the kernel then queued and Zenoh dropped, and the tbf run's fleet
-  RMSE was 1.32x the radio-capped run's.
+* **testbed, udp** — the testbed with the routers linked by Zenoh's UDP links (``--router-link udp``), uncapped.
+* **tbf cap** — that testbed with the same cap in the kernel: a ``tbf`` qdisc on every UAV host's veth at
+  ``(LINK_CAP × (N − 1) + u) × k`` (:func:`_tbf_rate`): the N − 1 links a host's router sends a belief on, plus
+  ``u``, the bytes per second only the ground receives (telemetry, the simulation's data: not capped by the
+  emulated radio), ``k`` the kernel bytes per byte of agent accounting (``ratio`` of
+  :func:`mesh_sim.testbed.bytes_check`: framing, Zenoh's own traffic); ``u`` and ``k`` measured by the uncapped
+  run over the same links; the bucket ``BURST_S`` s deep, like the emulated links'. The agents are told the cap as
+  a deployment would tell them its radio's, ``[sending] rate`` = :data:`LINK_CAP`
+  (:class:`agent.net.sending.SendConfig`): the sender budget the emulated radio's plan gives the radio-capped
+  agents. Datagram links because the emulated radio is one: it loses what exceeds the cap, where TCP retransmits
+  it and every message behind it waits.
+* **tbf cap, tcp** — the same over the TCP links (``u``, ``k`` from **testbed**), for comparison.
 
 Per run: fleet RMSE and its ratio to the oracle's, the ratio of that to the single-host run's (the issue's goal:
 within 10 %), fleet ANEES, belief latency (the mean over received beliefs, ``belief_latency_s`` of the agents'
 metrics), missed steps (steps late or skipped, over steps run: machine load), bytes per agent per
 second by the agents' own accounting and its ratio to the single-host run's, and for testbed runs the kernel's
-tx bytes per host per second with the comparison of :func:`mesh_sim.testbed.bytes_check`. The two capped runs are
-compared with each other on what got through — bytes *received* per agent per second (both thin what they send to
-the same budget; the kernel, like the emulated radio, drops what still exceeds the cap) — and fleet RMSE, tbf ÷
-radio (the issue's goal: within 10 %). Fleet RMSE, not its ratio to the oracle's: the oracle's inputs (the
-agents' measurements, sent to the world on the ground host) share the capped veth with the radio traffic under tbf,
-and not under the emulated radio.
+tx bytes per host per second with the comparison of :func:`mesh_sim.testbed.bytes_check`. The capped runs are
+compared with the radio cap's on what got through — bytes *received* per agent per second (both thin what they
+send to the same budget; the kernel, like the emulated radio, drops what still exceeds the cap) — and fleet RMSE,
+tbf ÷ radio (the issue's goal, judged on **tbf cap**: within 10 %). Fleet RMSE, not its ratio to the oracle's: the
+oracle's inputs (the agents' measurements, sent to the world on the ground host) share the capped veth with the
+radio traffic under tbf, and not under the emulated radio.
 """
 
 from __future__ import annotations
@@ -73,10 +77,12 @@ def run(quick: bool = False, repeats: int | None = None, *, agents: int | None =
             common.run_progress(NAME, 2 if quick else 4) as (console, advance):
         quiet = console if console.is_terminal else Console(stderr=True, quiet=True)
 
-        def measure(label: str, hosts: bool, radio: dict | None = None, tbf: float | None = None,
-                    sending: dict | None = None) -> dict:
+        def measure(label: str, hosts: bool, radio: dict | None = None, link: str = "tcp",
+                    cap_like: dict | None = None) -> dict:
+            """``cap_like``: the uncapped test-bed row whose overheads size the tbf cap (none: no cap)."""
             advance(f"{label} ({agents} agents, {duration:g} s)", 0)
-            row = _one_run(label, base, quiet, agents, duration, hosts, radio, tbf, sending)
+            tbf = None if cap_like is None else _tbf_rate(cap_like, agents)
+            row = _one_run(label, base, quiet, agents, duration, hosts, radio, tbf, link)
             advance(f"{label} done", 1)
             rows.append(row)
             return row
@@ -85,9 +91,8 @@ def run(quick: bool = False, repeats: int | None = None, *, agents: int | None =
         bed = measure("testbed", hosts=True)
         if not quick:
             measure("radio cap", hosts=False, radio=radio_cap)
-            overhead, ground_only = bed["kernel_ratio"] or 1.0, bed["unfanned_per_s"] or 0.0
-            measure("tbf cap", hosts=True, tbf=(LINK_CAP * (agents - 1) + ground_only) * overhead,
-                    sending={"rate": LINK_CAP})
+            measure("tbf cap", hosts=True, link="udp", cap_like=measure("testbed, udp", hosts=True, link="udp"))
+            measure("tbf cap, tcp", hosts=True, cap_like=bed)
     _add_ratios(rows)
     return {
         "benchmark": NAME,
@@ -99,8 +104,15 @@ def run(quick: bool = False, repeats: int | None = None, *, agents: int | None =
     }
 
 
+def _tbf_rate(bed: dict, agents: int) -> float:
+    """A UAV host's kernel cap for the emulated radio's: :data:`LINK_CAP` on each of the ``agents - 1`` links a
+    belief leaves on, plus what only the ground receives, times the kernel bytes per byte of agent accounting —
+    both measured by the uncapped test-bed run ``bed`` over the same router links."""
+    return (LINK_CAP * (agents - 1) + (bed["unfanned_per_s"] or 0.0)) * (bed["kernel_ratio"] or 1.0)
+
+
 def _one_run(label: str, base: Path, console: Console, agents: int, duration: float, hosts: bool,
-             radio: dict | None, tbf: float | None, sending: dict | None = None) -> dict:
+             radio: dict | None, tbf: float | None, link: str = "tcp") -> dict:
     from mesh_sim.launcher import Launcher, new_run_dir
     from mesh_sim.scenario import load
     from mesh_sim.testbed import TESTBED_FILE, run_testbed
@@ -108,12 +120,13 @@ def _one_run(label: str, base: Path, console: Console, agents: int, duration: fl
     overrides = {"agents": agents, "duration": duration, "seed": SEED, "sensor": dict(SENSOR)}
     if radio is not None:
         overrides["radio"] = radio
-    if sending is not None:
-        overrides["sending"] = sending
+    if tbf is not None:  # told the cap, as the emulated radio's plan tells the radio-capped agents
+        overrides["sending"] = {"rate": LINK_CAP}
     scenario = load("default", **overrides)
     run_dir = new_run_dir(base, f"{NAME}-{label.replace(' ', '-')}")
     options = {"rerun": "off", "console": console}
-    outcome = (run_testbed(scenario, run_dir, tbf_rate=tbf, **options) if hosts
+    tbf_burst = None if tbf is None else BURST_S * tbf  # the emulated links' depth: BURST_S seconds of the rate
+    outcome = (run_testbed(scenario, run_dir, tbf_rate=tbf, tbf_burst=tbf_burst, router_link=link, **options) if hosts
                else Launcher(scenario, run_dir, **options).run())
     if outcome.status == "interrupted":
         raise KeyboardInterrupt
@@ -126,7 +139,7 @@ def _one_run(label: str, base: Path, console: Console, agents: int, duration: fl
            "bytes_per_agent_per_s": fleet.get("bytes_per_agent_per_s"),
            "received_per_agent_per_s": _mean(a.get("bytes_rx") for a in team) / duration if team else None,
            "belief_latency_s": _latency(team),
-           "missed_steps": missed / steps if steps else None, "tbf_rate": tbf,
+           "missed_steps": missed / steps if steps else None, "tbf_rate": tbf, "router_link": link if hosts else None,
            "kernel_tx_per_host_per_s": None, "kernel_ratio": None, "payload_ratio": None, "unfanned_per_s": None}
     if hosts and (run_dir / TESTBED_FILE).exists():
         checks = list(json.loads((run_dir / TESTBED_FILE).read_text())["bytes"].values())
@@ -154,7 +167,7 @@ def _add_ratios(rows: list[dict]) -> None:
     """Each run against the single-host run; the tbf cap against the radio cap."""
     by = {r["run"]: r for r in rows}
     for row in rows:
-        against = by["radio cap"] if row["run"] == "tbf cap" else by["single host"]
+        against = by["radio cap"] if row["run"].startswith("tbf cap") else by["single host"]
         row["against"] = against["run"]
         row["rmse_vs"] = ratio(row["rmse"], against["rmse"])
         row["rmse_ratio_vs"] = ratio(row["rmse_ratio_to_oracle"], against["rmse_ratio_to_oracle"])
@@ -193,10 +206,10 @@ def report(result: dict, console=None) -> None:
           fmt(r["received_per_agent_per_s"], ",.0f"), fmt_ratio(r["received_ratio_vs"]),
           fmt(r["kernel_tx_per_host_per_s"], ",.0f"), fmt(r["kernel_ratio"], ".2f"), fmt(r["payload_ratio"], ".2f"))
          for r in result["rows"]],
-        caption=f"\"vs\": the ratio to the single-host run (the tbf cap's: to the radio cap's). Caps: radio "
+        caption=f"\"vs\": the ratio to the single-host run (the tbf caps': to the radio cap's). Caps: radio "
                 f"{s['link_cap']:g} B/s per link; tbf per UAV host = (that × (N − 1) + what only the ground receives) "
-                "× the testbed's kernel ÷ E. Sent/received: the agents' own accounting, per agent. E: the expected "
-                "bytes of mesh_sim.testbed.bytes_check. Where the cap also starves the oracle's inputs (tbf), compare "
-                "fleet RMSE, not ÷ oracle.")
+                "× the uncapped testbed's kernel ÷ E over the same router links (udp, or tcp). Sent/received: the "
+                "agents' own accounting, per agent. E: the expected bytes of mesh_sim.testbed.bytes_check. Where the "
+                "cap also starves the oracle's inputs (tbf), compare fleet RMSE, not ÷ oracle.")
     common.print_table(console, "Goals (issue 17)", ["goal", "met"],
                        [(name, common.verdict(ok)) for name, ok in result["goals"].items()])

@@ -22,13 +22,15 @@ def _row(run: str, rmse_ratio: float, bytes_s: float, received: float, missed: f
 
 def test_ratios_are_against_the_single_host_run_and_tbf_against_the_radio_cap(printed):
     rows = [_row("single host", 1.10, 3000, 9000), _row("testbed", 1.15, 3100, 9300, missed=0.01),
-            _row("radio cap", 1.4, 1500, 4000), _row("tbf cap", 1.68, 3000, 3800)]
+            _row("radio cap", 1.4, 1500, 4000), _row("tbf cap", 1.68, 3000, 3800),
+            _row("tbf cap, tcp", 2.0, 3000, 2000)]
     bench._add_ratios(rows)
     by = {r["run"]: r for r in rows}
     assert by["testbed"]["rmse_ratio_vs"] == pytest.approx(1.15 / 1.10)
     assert by["testbed"]["bytes_ratio_vs"] == pytest.approx(3100 / 3000)
     assert by["tbf cap"]["against"] == "radio cap" and by["tbf cap"]["received_ratio_vs"] == pytest.approx(0.95)
     assert by["tbf cap"]["bytes_ratio_vs"] == pytest.approx(2.0)
+    assert by["tbf cap, tcp"]["against"] == "radio cap" and by["tbf cap, tcp"]["received_ratio_vs"] == 0.5
     goals = bench._goals(rows)
     assert by["tbf cap"]["rmse_vs"] == 1.0  # fleet RMSE: the same here, although its ratio to the oracle's is not
     assert goals == {"testbed_rmse_ratio_within_10pct": True, "testbed_no_missed_steps": False,
@@ -56,12 +58,15 @@ def test_smallest_live_run(private_tmp):
     assert list(private_tmp.iterdir()) == []
     assert subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout == before
     rows = {r["run"]: r for r in result["rows"]}
-    assert list(rows) == ["single host", "testbed", "radio cap", "tbf cap"]
+    assert list(rows) == ["single host", "testbed", "radio cap", "testbed, udp", "tbf cap", "tbf cap, tcp"]
     assert all(r["status"] == "completed" and r["rmse"] is not None for r in rows.values()), rows
     bed = rows["testbed"]
     assert bed["kernel_tx_per_host_per_s"] > 0 and 1.0 < bed["payload_ratio"] < bed["kernel_ratio"]
-    one_peer = bench.LINK_CAP * 1 + bed["unfanned_per_s"]
-    assert rows["tbf cap"]["tbf_rate"] == pytest.approx(one_peer * bed["kernel_ratio"])
+    udp = rows["testbed, udp"]
+    assert (bed["router_link"], udp["router_link"], rows["tbf cap"]["router_link"]) == ("tcp", "udp", "udp")
+    assert rows["tbf cap"]["tbf_rate"] == pytest.approx((bench.LINK_CAP + udp["unfanned_per_s"]) * udp["kernel_ratio"])
+    assert rows["tbf cap, tcp"]["tbf_rate"] == pytest.approx((bench.LINK_CAP + bed["unfanned_per_s"])
+                                                             * bed["kernel_ratio"])
     assert rows["single host"]["rmse_ratio_vs"] == 1.0
     assert all(0 < r["belief_latency_s"] < 5 for r in rows.values()), rows
 

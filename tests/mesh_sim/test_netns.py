@@ -110,5 +110,7 @@ def test_bad_input_is_refused_with_what_was_wrong():
             net.link_down("z")
         with pytest.raises(ValueError, match="a rate cap must be positive bytes per second, got 0"):
             net.cap_rate("a", 0)
+        with pytest.raises(ValueError, match="a rate cap's burst must be positive bytes, got -1"):
+            net.cap_rate("a", 1000, burst=-1)
         with pytest.raises(netns.NetnsError, match="ip netns add .*: .*exists"):
             netns.run("ip", "netns", "add", net.host("a").netns)

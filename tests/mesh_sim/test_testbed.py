@@ -34,6 +34,8 @@ def test_link_down_specs():
     (["--link-down", "5:uav1:2"], "--link-down '5:uav1:2': times must satisfy 0 <= T < T_UP"),
     (["--agents", "2", "--link-down", "5:uav7"], "--link-down: no host 'uav7' in this run (hosts are uav0..uav1)"),
     (["--tbf-rate", "-5"], "--tbf-rate must be positive bytes per second, got -5"),
+    (["--tbf-burst", "9000"], "--tbf-burst must be positive bytes, with --tbf-rate; got 9000"),  # a depth, no rate
+    (["--tbf-rate", "2000", "--tbf-burst", "0"], "--tbf-burst must be positive bytes, with --tbf-rate; got 0"),
     (["--lockstep"], "--lockstep runs every agent in one process: nothing to spread over hosts"),
 ])
 def test_bad_testbed_options_are_one_line_and_exit_2(argv, says, tmp_path, capsys, monkeypatch):
@@ -61,17 +63,32 @@ def test_router_configs_are_zenoh_configs_in_a_full_mesh():
     assert config["connect"]["endpoints"] == ["tcp/10.213.0.1:7447", "tcp/10.213.0.2:7447"]
     parsed = zenoh.Config.from_json5(json.dumps(config))
     assert json.loads(parsed.get_json("transport/link/tx/lease")) == testbed.LEASE_MS
+    udp = testbed.router_config(hosts[2], hosts[:2], "udp")  # --router-link udp: between the routers only
+    assert udp["listen"]["endpoints"] == ["tcp/127.0.0.1:7447", "udp/10.213.0.3:7447"]
+    assert udp["connect"]["endpoints"] == ["udp/10.213.0.1:7447", "udp/10.213.0.2:7447"]
+    zenoh.Config.from_json5(json.dumps(udp))
+
+
+def test_an_unknown_router_link_is_refused_before_anything_is_made(tmp_path, capsys):
+    with pytest.raises(ValueError, match=r"--router-link must be one of \['tcp', 'udp'\], got 'quic'"):
+        testbed.run_testbed(None, tmp_path, router_link="quic")
+    with pytest.raises(SystemExit) as exit_:  # argparse's own refusal of a choice
+        cli.main(["testbed", "--out", str(tmp_path), "--router-link", "quic"])
+    assert exit_.value.code == cli.EXIT_USAGE and "invalid choice: 'quic'" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
 
 
 def test_bytes_check_counts_each_message_once_per_remote_router_subscribed():
     """E = beliefs × (peers + observer) + topology × peers + telemetry + simulation data; the payload ratio takes
-    66 bytes of headers per frame out."""
+    66 bytes of headers per frame out over TCP, 42 over UDP."""
     agent = {"bytes_tx_by_kind": {"track": 1000, "topology": 200, "telemetry": 300},
              "sim_bytes_tx_by_kind": {"measurement": 100}}
     check = testbed.bytes_check(agent, {"tx_bytes": 5000, "tx_packets": 10}, peers=3, observer=False)
     assert check["expected_tx"] == 1200 * 3 + 300 + 100
     assert check["ratio"] == pytest.approx(5000 / 4000)
     assert check["payload_ratio"] == pytest.approx((5000 - 660) / 4000)
+    over_udp = testbed.bytes_check(agent, {"tx_bytes": 5000, "tx_packets": 10}, peers=3, observer=False, link="udp")
+    assert over_udp["payload_ratio"] == pytest.approx((5000 - 420) / 4000)  # 42 bytes of headers: UDP's 8, not 32
     assert testbed.bytes_check(agent, {"tx_bytes": 5000, "tx_packets": 10}, peers=3, observer=True)[
         "expected_tx"] == 1000 * 4 + 200 * 3 + 300 + 100
 
