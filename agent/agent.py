@@ -56,8 +56,7 @@ class Agent:
         self.world = WorldTruth(self.terrain, agent_id)
         self.unused: Counter = Counter()  # reason -> observations the agent could not use
         plan = scenario.radio_plan
-        self.sender = SendScheduler(scenario.sending,
-                                     scenario.sending.budget(None if plan is None else plan.sender_budget(agent_id)))
+        self.sender = SendScheduler(scenario.sending, scenario.sending.budget(plan and plan.sender_budget(agent_id)))
         self.topology = Topology(agent_id)
         self.fusions = FusionLog(silence_s=2 * scenario.sending.max_silence)
         self.exchanges: dict = {}
