@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Collection
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 
@@ -114,13 +115,21 @@ def _propagation(motion, dt: float) -> tuple[np.ndarray, np.ndarray]:
     return motion.transition(dt), motion.noise(dt)
 
 
+class _Sent(NamedTuple):
+    """A track's last broadcast: when, what it said (``mean``, ``cov`` ``None``: unobservable) and whom it reached."""
+
+    t: float
+    mean: np.ndarray | None
+    cov: np.ndarray | None
+    reached: frozenset[str]
+
+
 class SendScheduler:
     def __init__(self, config: SendConfig, budget: float | None, burst: float | None = None):
         self.config = config
         self.bucket = None if budget is None else TokenBucket(budget, burst or config.burst or default_burst(budget))
         self.timer = Every(config.period)
-        #: track id -> (time, mean, cov, the neighbours it reached) when last sent (mean, cov None: unobservable)
-        self._sent: dict[int, tuple] = {}
+        self._sent: dict[int, _Sent] = {}  # track id -> its last broadcast
         self.thinned = 0  # tracks that were due but did not fit the budget
 
     def admit(self, size: int, t: float) -> bool:
@@ -138,16 +147,16 @@ class SendScheduler:
         measures holds nothing of it — as OSPF hands a new neighbour its whole database. Otherwise the halves
         of a merged partition waited for each track's next trigger or ``max_silence``: 1-3 s after a merge,
         1.4-2.6x the in-flight oracle on the moving target of ``partition``."""
-        ranked = []
+        ranked, audience = [], frozenset(neighbours)
         for track in tracks:
             now = track.estimate()
-            if track.id not in self._sent or not self._sent[track.id][3] >= set(neighbours):
+            last = self._sent.get(track.id)
+            if last is None or not last.reached >= audience:
                 ranked.append((np.inf, track, now))
                 continue
-            when, mean, cov, _ = self._sent[track.id]
-            gain = 0.0 if mean is None else divergence(now, mean, cov, motion, t - when)
-            if gain >= self.config.info_gain or t - when >= self.config.max_silence - 1e-9:
-                ranked.append((gain + (t - when) / self.config.max_silence, track, now))
+            gain = 0.0 if last.mean is None else divergence(now, last.mean, last.cov, motion, t - last.t)
+            if gain >= self.config.info_gain or t - last.t >= self.config.max_silence - 1e-9:
+                ranked.append((gain + (t - last.t) / self.config.max_silence, track, now))
         ranked.sort(key=lambda r: -r[0])
         chosen = []
         for _, track, now in ranked:
@@ -155,13 +164,13 @@ class SendScheduler:
                 self.thinned += 1
                 continue
             chosen.append(track)
-            self._remember(track.id, t, now, frozenset(neighbours))
+            self._remember(track.id, t, now, audience)
         return chosen
 
     def _remember(self, track_id: int, t: float, sent: Gaussian, reached: frozenset[str]) -> None:
         """What the receivers ``reached`` now hold of the track (a belief with an unobserved direction is
         remembered as nothing: it is re-sent on silence only)."""
         try:
-            self._sent[track_id] = (t, sent.mean, sent.cov, reached)
+            self._sent[track_id] = _Sent(t, sent.mean, sent.cov, reached)
         except UninformativeBeliefError:
-            self._sent[track_id] = (t, None, None, reached)
+            self._sent[track_id] = _Sent(t, None, None, reached)
