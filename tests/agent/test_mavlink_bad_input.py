@@ -131,3 +131,31 @@ def test_a_ground_station_heartbeat_is_not_taken_for_the_autopilot():
     finally:
         sender.close()
         link.close()
+
+
+def test_a_tcp_stream_ending_right_behind_its_data_is_counted_as_closed_and_reconnected():
+    # bad input: the autopilot sends a HEARTBEAT and closes the TCP connection at once, twice; the stream's end
+    # is read in the same pass as the data (the handler is slow), where pymavlink reconnects inside recv
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(4)
+    server.settimeout(3.0)
+    mav = encoder()
+    heartbeat = bytes(mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0)
+                      .pack(mav))
+    link = MavlinkLink(f"tcp:127.0.0.1:{server.getsockname()[1]}", lambda msg: time.sleep(0.1))
+    accepted = []
+    try:
+        for hang_ups in (1, 2):
+            client, _ = server.accept()
+            accepted.append(client)
+            client.sendall(heartbeat)
+            client.close()
+            wait_for(lambda count=hang_ups: link.rejected["link_closed"] >= count, timeout=3.0)
+        accepted.append(server.accept()[0])  # the link opened the connection again after the second hang-up
+        assert link.rejected["link_closed"] == 2 and link._thread.is_alive()
+    finally:
+        link.close()
+        for client in accepted:
+            client.close()
+        server.close()

@@ -133,8 +133,8 @@ class MavlinkLink:
     def _pass(self) -> None:
         now = time.monotonic()
         due = min((p.due for p in self._periodic), default=now + IDLE_WAIT) if self.autopilot else now + IDLE_WAIT
-        if self._readable(max(0.0, min(due - now, IDLE_WAIT))) and not self._read():
-            self.rejected["link_closed"] += 1  # readable, yet nothing: a TCP stream's end (pymavlink reconnects)
+        if self._readable(max(0.0, min(due - now, IDLE_WAIT))) and self._read_until_closed():
+            self.rejected["link_closed"] += 1
             self._stop.wait(RECONNECT_WAIT)
         if self.autopilot is None:
             return
@@ -153,23 +153,30 @@ class MavlinkLink:
         readable, _, _ = select.select([port], [], [], timeout)
         return bool(readable)
 
-    def _read(self) -> bool:
-        """Read what is there (at most :data:`READS_PER_PASS` reads); ``False`` if the first read got nothing."""
+    def _read_until_closed(self) -> bool:
+        """Read what is there (at most :data:`READS_PER_PASS` reads); ``True`` if the link closed meanwhile.
+
+        Closed means: the read raised (reset by the autopilot, or pymavlink's reconnection refused); pymavlink
+        replaced the socket (it met a TCP stream's end and reconnected inside ``recv``, which then returns
+        nothing, whether or not earlier reads of this pass got data); or the first read of a readable port got
+        nothing (a serial device's end)."""
         for reads in range(READS_PER_PASS):
+            port = self.connection.port
             try:
                 data = self.connection.recv(READ_SIZE)
-            except OSError:  # reset by the autopilot (pymavlink has already reconnected a TCP link)
-                self.rejected["link_closed"] += 1
+            except OSError:
+                return True
+            if port is not None and self.connection.port is not port:
                 return True
             if not data:
-                return reads > 0
+                return reads == 0
             if not self._admit():
                 self.rejected["flood"] += 1
                 continue
             for msg in self.connection.mav.parse_buffer(data) or ():
                 self._tokens -= 1
                 self._accept(msg)
-        return True
+        return False
 
     def _admit(self) -> bool:
         """Token bucket: ``max_message_rate`` tokens a second, at most one second's worth held."""
