@@ -16,7 +16,7 @@
   1 % of their deadlines or whose video source failed ends "completed with warnings" (``mesh_sim.run_health``);
   a bad ``--duration``, ``--loss``, ... names the flag (``mesh_sim.run_overrides``);
 * ``skymesh testbed [the options of run] [--link-down T:uavK[:T_UP] ...] [--tbf-rate BYTES_PER_S]
-  [--tbf-burst BYTES] [--router-link tcp|udp]`` — the run
+  [--tbf-burst BYTES] [--tbf-per-link] [--router-link tcp|udp]`` — the run
   across hosts on this machine: a Linux network namespace and a Zenoh router per agent (``mesh_sim.testbed``;
   root; not with ``--lockstep``, ``--zenoh-config`` or ``--vehicle mavlink``); a link taken down and up mid-run,
   the kernel's rate cap on every UAV host; ``testbed.json`` in the run folder;
@@ -140,6 +140,9 @@ def build_parser() -> argparse.ArgumentParser:
                          help="cap what every UAV host sends with the kernel's token bucket (tc tbf)")
     testbed.add_argument("--tbf-burst", type=float, metavar="BYTES",
                          help="the token bucket's depth (default: 1/50 s of --tbf-rate, at least 4096)")
+    testbed.add_argument("--tbf-per-link", action="store_true",
+                         help="--tbf-rate caps each directed link between two UAV hosts, a bucket per link, as the "
+                              "emulated radio's rate does (default: a UAV host's whole egress)")
     testbed.add_argument("--router-link", choices=("tcp", "udp"), default="tcp",
                          help="the transport between the hosts' routers (udp: what the network drops is lost, "
                               "not retransmitted)")
@@ -272,7 +275,8 @@ def _run(args) -> int:
                     if args.zenoh_config:
                         raise ValueError("--zenoh-config is for skymesh run: the test bed opens a router per host")
                     outcome = run_testbed(scenario, run_dir, [LinkDown.parse(spec) for spec in args.link_down],
-                                          args.tbf_rate, args.tbf_burst, args.router_link, **options)
+                                          args.tbf_rate, args.tbf_burst, args.router_link, args.tbf_per_link,
+                                          **options)
                 else:
                     outcome = Launcher(scenario, run_dir, zenoh_config=args.zenoh_config, **options).run()
                 metrics = outcome.metrics

@@ -11,7 +11,8 @@ Every name carries a per-run tag (``uuid4`` hex), so two test beds never collide
 interfaces and the bridge go with them — when its body ends, raises or is interrupted (Ctrl-C).
 
 Impairments are the kernel's own: :meth:`Network.link_down` / :meth:`Network.link_up` (``ip link set``) and
-:meth:`Network.cap_rate` (a ``tbf`` qdisc on the host's egress). Traffic is read from the kernel's counters of
+:meth:`Network.cap_rate` (a ``tbf`` qdisc on the host's egress), :meth:`Network.cap_links` (a ``tbf`` per
+destination host, as the emulated radio caps each directed link). Traffic is read from the kernel's counters of
 the host's veth (:meth:`Network.counters`: ``ip -s -j link``, Ethernet frames with their headers).
 """
 
@@ -29,6 +30,8 @@ from dataclasses import dataclass
 
 SUBNET = "10.213.0.0/24"  # private (RFC 1918); only ever configured inside the namespaces made here
 TBF_LATENCY_MS = 200  # how long a packet may wait in the tbf queue before it is dropped (tc-tbf(8)); chosen here
+TBF_LINK_LATENCY_MS = 20  # cap_links: a queue of a packet or two at the radio's rates; chosen here
+UNSHAPED = "10gbit"  # an htb class that only sorts packets: faster than any veth carries here
 TBF_MIN_BURST = 4096  # bytes: a burst below a few MTUs stalls tbf at low rates (tc-tbf(8): burst >= rate / HZ)
 
 
@@ -139,14 +142,29 @@ class Network:
         """Cap what host ``name`` sends at ``bytes_per_s`` with a token bucket (``tc qdisc replace ... tbf``:
         rate in bit/s, ``burst`` bytes deep — by default 1/50 s of the rate — and at least :data:`TBF_MIN_BURST`,
         packets older than :data:`TBF_LATENCY_MS` dropped)."""
-        if not bytes_per_s > 0:
-            raise ValueError(f"a rate cap must be positive bytes per second, got {bytes_per_s}")
-        if burst is not None and not burst > 0:
-            raise ValueError(f"a rate cap's burst must be positive bytes, got {burst}")
         host = self.host(name)
-        burst = max(TBF_MIN_BURST, int(bytes_per_s / 50 if burst is None else burst))
-        run("tc", "-n", host.netns, "qdisc", "replace", "dev", host.veth, "root", "tbf",
-            "rate", f"{int(bytes_per_s * 8)}bit", "burst", str(burst), "latency", f"{TBF_LATENCY_MS}ms")
+        run("tc", "-n", host.netns, "qdisc", "replace", "dev", host.veth, "root",
+            *_tbf(bytes_per_s, burst, TBF_LATENCY_MS))
+
+    def cap_links(self, name: str, to: Sequence[str], bytes_per_s: float, burst: float | None = None) -> None:
+        """Cap each directed link from host ``name`` to a host of ``to`` at ``bytes_per_s``, every link with a
+        token bucket of its own — what the emulated radio's ``rate`` does (agent/net/link_emulator.py): an ``htb``
+        root whose classes only sort the packets by IPv4 destination (``u32`` filters; each class at
+        :data:`UNSHAPED`), each destination's class with a ``tbf`` leaf (``burst`` as :meth:`cap_rate`'s; a queue
+        of :data:`TBF_LINK_LATENCY_MS`: the emulated bucket drops what exceeds it rather than delaying it).
+        Packets to any other host (the default class) leave unshaped."""
+        host = self.host(name)
+        peers = [self.host(other) for other in to]
+        leaf = _tbf(bytes_per_s, burst, TBF_LINK_LATENCY_MS)
+        tc = ("tc", "-n", host.netns)
+        run(*tc, "qdisc", "replace", "dev", host.veth, "root", "handle", "1:", "htb", "default", "1")
+        run(*tc, "class", "add", "dev", host.veth, "parent", "1:", "classid", "1:1", "htb", "rate", UNSHAPED)
+        for minor, peer in enumerate(peers, start=2):
+            run(*tc, "class", "add", "dev", host.veth, "parent", "1:", "classid", f"1:{minor:x}", "htb",
+                "rate", UNSHAPED)
+            run(*tc, "qdisc", "add", "dev", host.veth, "parent", f"1:{minor:x}", "handle", f"{minor:x}:", *leaf)
+            run(*tc, "filter", "add", "dev", host.veth, "parent", "1:", "protocol", "ip", "prio", "1", "u32",
+                "match", "ip", "dst", f"{peer.address}/32", "flowid", f"1:{minor:x}")
 
     def counters(self, name: str) -> dict[str, int]:
         """The kernel's byte and packet counters of host ``name``'s veth since it was made (frames with their
@@ -155,6 +173,18 @@ class Network:
         (link,) = json.loads(run("ip", "-n", host.netns, "-s", "-j", "link", "show", "dev", host.veth))
         stats = link["stats64"]
         return {f"{way}_{what}": int(stats[way][what]) for way in ("tx", "rx") for what in ("bytes", "packets")}
+
+
+def _tbf(bytes_per_s: float, burst: float | None, latency_ms: float) -> tuple[str, ...]:
+    """A ``tbf`` qdisc's kind and parameters: ``bytes_per_s`` as bit/s, ``burst`` bytes (default 1/50 s of the
+    rate; at least :data:`TBF_MIN_BURST`), packets older than ``latency_ms`` dropped. ``ValueError`` for a rate or
+    burst that is not positive."""
+    if not bytes_per_s > 0:
+        raise ValueError(f"a rate cap must be positive bytes per second, got {bytes_per_s}")
+    if burst is not None and not burst > 0:
+        raise ValueError(f"a rate cap's burst must be positive bytes, got {burst}")
+    burst = max(TBF_MIN_BURST, int(bytes_per_s / 50 if burst is None else burst))
+    return "tbf", "rate", f"{int(bytes_per_s * 8)}bit", "burst", str(burst), "latency", f"{latency_ms:g}ms"
 
 
 @contextmanager

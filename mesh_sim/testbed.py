@@ -18,7 +18,10 @@ of :func:`bytes_check`.
 
 Impairments are the kernel's: ``--link-down T:uavK[:T_UP]`` sets host K's veth down at simulation time T (and
 up at T_UP), ``--tbf-rate BYTES_PER_S`` caps what every UAV host sends with ``tc ... tbf`` (not the ground: the
-world's truth and the observer are the simulation's, not radio traffic; ``--tbf-burst BYTES``: the bucket's depth).
+world's truth and the observer are the simulation's, not radio traffic; ``--tbf-burst BYTES``: the bucket's depth);
+with ``--tbf-per-link`` the rate caps each directed link between two UAV hosts instead, with a bucket of its own
+(:meth:`mesh_sim.netns.Network.cap_links`), as the emulated radio's ``rate`` does, and what goes to the ground
+is not capped.
 ``--router-link udp`` links the routers with Zenoh's datagram links instead of TCP: what the network drops is lost,
 as on the emulated radio, instead of retransmitted behind a stalled stream. (This kernel family may
 lack ``netem``; delay and loss stay the emulated radio's.)
@@ -213,7 +216,8 @@ def bytes_check(agent: dict, sent: dict[str, int], peers: int, observer: bool, l
 
 
 def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rate: float | None = None,
-                tbf_burst: float | None = None, router_link: str = "tcp", **launcher) -> RunOutcome:
+                tbf_burst: float | None = None, router_link: str = "tcp", tbf_per_link: bool = False,
+                **launcher) -> RunOutcome:
     """``skymesh testbed``: the hosts made, the run, ``testbed.json`` written, the hosts removed (also on failure,
     Ctrl-C or SIGTERM). ``ValueError`` for bad settings, ``OSError`` when namespaces cannot be made here."""
     if router_link not in FRAME_HEADERS:
@@ -222,6 +226,8 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
         raise ValueError(f"--tbf-rate must be positive bytes per second, got {tbf_rate:g}")
     if tbf_burst is not None and (tbf_rate is None or not tbf_burst > 0):
         raise ValueError(f"--tbf-burst must be positive bytes, with --tbf-rate; got {tbf_burst:g}")
+    if tbf_per_link and tbf_rate is None:
+        raise ValueError("--tbf-per-link needs --tbf-rate: the rate of each directed link")
     if (why := netns.unavailable()) is not None:
         raise OSError(f"no namespace test bed here: {why}")
     names = [f"uav{i}" for i in range(scenario.agent.agents)]
@@ -232,7 +238,10 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
         with _sigterm_raises(), netns.network([GROUND, *names]) as net:  # SIGTERM while setting up: removed too
             if tbf_rate is not None:  # the UAVs' radios: the ground's traffic is the simulation's, not radio
                 for name in names:
-                    net.cap_rate(name, tbf_rate, tbf_burst)
+                    if tbf_per_link:
+                        net.cap_links(name, [other for other in names if other != name], tbf_rate, tbf_burst)
+                    else:
+                        net.cap_rate(name, tbf_rate, tbf_burst)
             bed = TestbedLauncher(net, scenario, run_dir, link_down=link_down, router_link=router_link, **launcher)
             try:
                 outcome = bed.run()
@@ -252,6 +261,7 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
                               "at_epoch": bed.at_epoch.get(host.name)} for host in net.hosts.values()},
         "tbf_rate": tbf_rate,
         "tbf_burst": tbf_burst,
+        "tbf_per_link": tbf_per_link,
         "router_link": router_link,
         "link_events": bed.events.done if bed.events is not None else [],
         "bytes": {name: bytes_check(agents[name], sent[name], len(names) - 1, bed.rerun != "off", router_link)

@@ -22,8 +22,10 @@ def _row(run: str, rmse_ratio: float, bytes_s: float, received: float, missed: f
 
 def test_ratios_are_against_the_single_host_run_and_tbf_against_the_radio_cap(printed):
     rows = [_row("single host", 1.10, 3000, 9000), _row("testbed", 1.15, 3100, 9300, missed=0.01),
-            _row("radio cap", 1.4, 1500, 4000), _row("tbf cap", 1.68, 3000, 3800),
-            _row("tbf cap, tcp", 2.0, 3000, 2000)]
+            _row("radio cap", 1.4, 1500, 4000), {**_row("testbed, udp", 1.1, 3000, 9000), "kernel_ratio": 1.16,
+                                                 "payload_ratio": 1.07},
+            _row("tbf cap", 1.68, 3000, 3800), _row("tbf cap, tcp", 2.0, 3000, 2000),
+            {**_row("tbf per link", 1.5, 1500, 4300), "rmse": 1.2}]
     bench._add_ratios(rows)
     by = {r["run"]: r for r in rows}
     assert by["testbed"]["rmse_ratio_vs"] == pytest.approx(1.15 / 1.10)
@@ -33,8 +35,12 @@ def test_ratios_are_against_the_single_host_run_and_tbf_against_the_radio_cap(pr
     assert by["tbf cap, tcp"]["against"] == "radio cap" and by["tbf cap, tcp"]["received_ratio_vs"] == 0.5
     goals = bench._goals(rows)
     assert by["tbf cap"]["rmse_vs"] == 1.0  # fleet RMSE: the same here, although its ratio to the oracle's is not
+    assert by["tbf per link"]["against"] == "radio cap" and by["tbf per link"]["rmse_vs"] == pytest.approx(1.2)
+    # judged: the kernel's bytes on the uncapped udp test bed, and the per-link cap (the emulated radio's impairment)
     assert goals == {"testbed_rmse_ratio_within_10pct": True, "testbed_no_missed_steps": False,
-                     "tbf_vs_radio_received_bytes_within_10pct": True, "tbf_vs_radio_fleet_rmse_within_10pct": True}
+                     "kernel_bytes_within_10pct_of_accounting": False,
+                     "kernel_payload_within_10pct_of_accounting": True,
+                     "tbf_vs_radio_received_bytes_within_10pct": True, "tbf_vs_radio_fleet_rmse_within_10pct": False}
     text = printed(bench, {"settings": {"agents": 4, "duration_s": 15.0, "seed": 1, "link_cap": 1500.0},
                            "rows": rows, "goals": goals})
     assert "single host" in text and "tbf cap" in text and "1.05x" in text
@@ -58,7 +64,8 @@ def test_smallest_live_run(private_tmp):
     assert list(private_tmp.iterdir()) == []
     assert subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout == before
     rows = {r["run"]: r for r in result["rows"]}
-    assert list(rows) == ["single host", "testbed", "radio cap", "testbed, udp", "tbf cap", "tbf cap, tcp"]
+    assert list(rows) == ["single host", "testbed", "radio cap", "testbed, udp", "tbf cap", "tbf cap, tcp",
+                          "tbf per link"]
     assert all(r["status"] == "completed" and r["rmse"] is not None for r in rows.values()), rows
     bed = rows["testbed"]
     assert bed["kernel_tx_per_host_per_s"] > 0 and 1.0 < bed["payload_ratio"] < bed["kernel_ratio"]
@@ -67,6 +74,8 @@ def test_smallest_live_run(private_tmp):
     assert rows["tbf cap"]["tbf_rate"] == pytest.approx((bench.LINK_CAP + udp["unfanned_per_s"]) * udp["kernel_ratio"])
     assert rows["tbf cap, tcp"]["tbf_rate"] == pytest.approx((bench.LINK_CAP + bed["unfanned_per_s"])
                                                              * bed["kernel_ratio"])
+    assert rows["tbf per link"]["tbf_per_link"] and rows["tbf per link"]["router_link"] == "udp"
+    assert rows["tbf per link"]["tbf_rate"] == pytest.approx(bench.LINK_CAP * udp["kernel_ratio"])
     assert rows["single host"]["rmse_ratio_vs"] == 1.0
     assert all(0 < r["belief_latency_s"] < 5 for r in rows.values()), rows
 

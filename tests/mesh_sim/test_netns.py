@@ -90,6 +90,19 @@ def test_tbf_caps_what_a_host_sends(sink):
     assert free > 10 * CAP, free
 
 
+def test_per_link_caps_cap_each_destination_and_leave_the_others_alone(sink):
+    """``cap_links("a", ["b"], CAP)``: a TCP stream from a to b runs at the cap (as above), one from a to c —
+    a destination without a cap — at many times it; a third host's link to b is not a's bucket."""
+    with netns.network(["a", "b", "c"]) as net:
+        sink(net, "b")
+        sink(net, "c")
+        net.cap_links("a", ["b"], CAP)
+        to_b, to_c = _stream(net, "a", "b", STREAM_S), _stream(net, "a", "c", 0.5)
+        from_c = _stream(net, "c", "b", 0.5)
+    assert to_b == pytest.approx(CAP, rel=0.35), to_b
+    assert to_c > 10 * CAP and from_c > 10 * CAP, (to_c, from_c)
+
+
 def test_everything_made_is_removed_also_when_the_body_raises():
     before = _ip_state()
     with pytest.raises(RuntimeError, match="the body failed"):
@@ -112,5 +125,9 @@ def test_bad_input_is_refused_with_what_was_wrong():
             net.cap_rate("a", 0)
         with pytest.raises(ValueError, match="a rate cap's burst must be positive bytes, got -1"):
             net.cap_rate("a", 1000, burst=-1)
+        with pytest.raises(ValueError, match="a rate cap must be positive bytes per second, got -3"):
+            net.cap_links("a", ["a"], -3)
+        with pytest.raises(ValueError, match=r"no host 'q' in this network \(hosts: a\)"):
+            net.cap_links("a", ["q"], 1000)
         with pytest.raises(netns.NetnsError, match="ip netns add .*: .*exists"):
             netns.run("ip", "netns", "add", net.host("a").netns)

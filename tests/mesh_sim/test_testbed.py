@@ -36,6 +36,7 @@ def test_link_down_specs():
     (["--tbf-rate", "-5"], "--tbf-rate must be positive bytes per second, got -5"),
     (["--tbf-burst", "9000"], "--tbf-burst must be positive bytes, with --tbf-rate; got 9000"),  # a depth, no rate
     (["--tbf-rate", "2000", "--tbf-burst", "0"], "--tbf-burst must be positive bytes, with --tbf-rate; got 0"),
+    (["--tbf-per-link"], "--tbf-per-link needs --tbf-rate: the rate of each directed link"),  # a cap with no rate
     (["--lockstep"], "--lockstep runs every agent in one process: nothing to spread over hosts"),
 ])
 def test_bad_testbed_options_are_one_line_and_exit_2(argv, says, tmp_path, capsys, monkeypatch):
