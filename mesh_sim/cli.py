@@ -142,7 +142,8 @@ def build_parser() -> argparse.ArgumentParser:
                          help="the token bucket's depth (default: 1/50 s of --tbf-rate, at least 4096)")
     testbed.add_argument("--tbf-per-link", action="store_true",
                          help="--tbf-rate caps each directed link between two UAV hosts, a bucket per link, as the "
-                              "emulated radio's rate does (default: a UAV host's whole egress)")
+                              "emulated radio's rate does (default: a UAV host's whole egress); with "
+                              "--router-link udp")
     testbed.add_argument("--router-link", choices=("tcp", "udp"), default="tcp",
                          help="the transport between the hosts' routers (udp: what the network drops is lost, "
                               "not retransmitted)")

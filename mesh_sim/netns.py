@@ -29,8 +29,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 SUBNET = "10.213.0.0/24"  # private (RFC 1918); only ever configured inside the namespaces made here
-TBF_LATENCY_MS = 200  # how long a packet may wait in the tbf queue before it is dropped (tc-tbf(8)); chosen here
-TBF_LINK_LATENCY_MS = 20  # cap_links: a queue of a packet or two at the radio's rates; chosen here
+TBF_QUEUE_S = 0.2  # cap_rate: the tbf queue holds this many seconds of the rate (tc-tbf(8) limit); chosen here
+TBF_MIN_LIMIT = 1600  # bytes: a tbf queue holds at least one full Ethernet frame (1514), or it drops every such frame
 UNSHAPED = "10gbit"  # an htb class that only sorts packets: faster than any veth carries here
 TBF_MIN_BURST = 4096  # bytes: a burst below a few MTUs stalls tbf at low rates (tc-tbf(8): burst >= rate / HZ)
 
@@ -140,22 +140,24 @@ class Network:
 
     def cap_rate(self, name: str, bytes_per_s: float, burst: float | None = None) -> None:
         """Cap what host ``name`` sends at ``bytes_per_s`` with a token bucket (``tc qdisc replace ... tbf``:
-        rate in bit/s, ``burst`` bytes deep — by default 1/50 s of the rate — and at least :data:`TBF_MIN_BURST`,
-        packets older than :data:`TBF_LATENCY_MS` dropped)."""
+        rate in bit/s, ``burst`` bytes deep — by default 1/50 s of the rate — and at least :data:`TBF_MIN_BURST`;
+        packets that find the bucket empty wait in a queue of :data:`TBF_QUEUE_S` seconds of the rate, and what
+        does not fit the queue is dropped)."""
         host = self.host(name)
         run("tc", "-n", host.netns, "qdisc", "replace", "dev", host.veth, "root",
-            *_tbf(bytes_per_s, burst, TBF_LATENCY_MS))
+            *_tbf(bytes_per_s, burst, bytes_per_s * TBF_QUEUE_S))
 
     def cap_links(self, name: str, to: Sequence[str], bytes_per_s: float, burst: float | None = None) -> None:
         """Cap each directed link from host ``name`` to a host of ``to`` at ``bytes_per_s``, every link with a
         token bucket of its own — what the emulated radio's ``rate`` does (agent/net/link_emulator.py): an ``htb``
         root whose classes only sort the packets by IPv4 destination (``u32`` filters; each class at
         :data:`UNSHAPED`), each destination's class with a ``tbf`` leaf (``burst`` as :meth:`cap_rate`'s; a queue
-        of :data:`TBF_LINK_LATENCY_MS`: the emulated bucket drops what exceeds it rather than delaying it).
-        Packets to any other host (the default class) leave unshaped."""
+        of one frame, :data:`TBF_MIN_LIMIT`: the emulated bucket drops what does not fit it rather than delaying
+        it, and the kernel comes as close as it can — one packet waits for tokens, what arrives meanwhile is
+        dropped). Packets to any other host (the default class) leave unshaped."""
         host = self.host(name)
         peers = [self.host(other) for other in to]
-        leaf = _tbf(bytes_per_s, burst, TBF_LINK_LATENCY_MS)
+        leaf = _tbf(bytes_per_s, burst, TBF_MIN_LIMIT)
         tc = ("tc", "-n", host.netns)
         run(*tc, "qdisc", "replace", "dev", host.veth, "root", "handle", "1:", "htb", "default", "1")
         run(*tc, "class", "add", "dev", host.veth, "parent", "1:", "classid", "1:1", "htb", "rate", UNSHAPED)
@@ -175,16 +177,20 @@ class Network:
         return {f"{way}_{what}": int(stats[way][what]) for way in ("tx", "rx") for what in ("bytes", "packets")}
 
 
-def _tbf(bytes_per_s: float, burst: float | None, latency_ms: float) -> tuple[str, ...]:
+def _tbf(bytes_per_s: float, burst: float | None, queue: float) -> tuple[str, ...]:
     """A ``tbf`` qdisc's kind and parameters: ``bytes_per_s`` as bit/s, ``burst`` bytes (default 1/50 s of the
-    rate; at least :data:`TBF_MIN_BURST`), packets older than ``latency_ms`` dropped. ``ValueError`` for a rate or
-    burst that is not positive."""
+    rate; at least :data:`TBF_MIN_BURST`), a queue of ``queue`` bytes (at least :data:`TBF_MIN_LIMIT`) for the
+    packets waiting for tokens; a packet that does not fit it is dropped. The queue is given as tc-tbf(8)'s
+    ``limit``, not its ``latency``: tc turns a latency into ``rate × latency + burst`` bytes, so a 2 s bucket
+    made a 20 ms latency a 2 s queue (measured: belief latency 1.2-1.5 s under per-link caps, 0.45 s under
+    the emulated radio's). ``ValueError`` for a rate or burst that is not positive."""
     if not bytes_per_s > 0:
         raise ValueError(f"a rate cap must be positive bytes per second, got {bytes_per_s}")
     if burst is not None and not burst > 0:
         raise ValueError(f"a rate cap's burst must be positive bytes, got {burst}")
     burst = max(TBF_MIN_BURST, int(bytes_per_s / 50 if burst is None else burst))
-    return "tbf", "rate", f"{int(bytes_per_s * 8)}bit", "burst", str(burst), "latency", f"{latency_ms:g}ms"
+    return ("tbf", "rate", f"{int(bytes_per_s * 8)}bit", "burst", str(burst),
+            "limit", str(max(TBF_MIN_LIMIT, int(queue))))
 
 
 @contextmanager

@@ -19,9 +19,9 @@ of :func:`bytes_check`.
 Impairments are the kernel's: ``--link-down T:uavK[:T_UP]`` sets host K's veth down at simulation time T (and
 up at T_UP), ``--tbf-rate BYTES_PER_S`` caps what every UAV host sends with ``tc ... tbf`` (not the ground: the
 world's truth and the observer are the simulation's, not radio traffic; ``--tbf-burst BYTES``: the bucket's depth);
-with ``--tbf-per-link`` the rate caps each directed link between two UAV hosts instead, with a bucket of its own
-(:meth:`mesh_sim.netns.Network.cap_links`), as the emulated radio's ``rate`` does, and what goes to the ground
-is not capped.
+with ``--tbf-per-link`` (and ``--router-link udp``) the rate caps each directed link between two UAV hosts
+instead, with a bucket of its own (:meth:`mesh_sim.netns.Network.cap_links`), as the emulated radio's ``rate``
+does, and what goes to the ground is not capped.
 ``--router-link udp`` links the routers with Zenoh's datagram links instead of TCP: what the network drops is lost,
 as on the emulated radio, instead of retransmitted behind a stalled stream. (This kernel family may
 lack ``netem``; delay and loss stay the emulated radio's.)
@@ -228,6 +228,9 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
         raise ValueError(f"--tbf-burst must be positive bytes, with --tbf-rate; got {tbf_burst:g}")
     if tbf_per_link and tbf_rate is None:
         raise ValueError("--tbf-per-link needs --tbf-rate: the rate of each directed link")
+    if tbf_per_link and router_link != "udp":
+        raise ValueError("--tbf-per-link needs --router-link udp: its queues of one frame would drop most of a TCP "
+                         "stream's segments")
     if (why := netns.unavailable()) is not None:
         raise OSError(f"no namespace test bed here: {why}")
     names = [f"uav{i}" for i in range(scenario.agent.agents)]

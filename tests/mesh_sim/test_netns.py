@@ -63,6 +63,20 @@ def _stream(net: netns.Network, client: str, server: str, seconds: float) -> flo
     return (net.counters(client)["tx_bytes"] - before) / elapsed
 
 
+def _datagrams(net: netns.Network, client: str, server: str, seconds: float) -> float:
+    """Bytes per second ``client`` put on its veth (kernel counter) while sending 1000-byte UDP datagrams to
+    ``server`` as fast as it can for ``seconds`` (no sink: what the kernel drops is dropped, as on a radio)."""
+    code = (f"import socket, time; s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n"
+            f"end = time.time() + {seconds}\nwhile time.time() < end:\n"
+            f"    try: s.sendto(bytes(1000), ('{net.host(server).address}', {PORT}))\n"
+            f"    except OSError: pass\n")
+    before = net.counters(client)["tx_bytes"]
+    started = time.time()
+    subprocess.run([*net.exec_prefix(client), sys.executable, "-c", code], check=True, timeout=60)
+    elapsed = time.time() - started
+    return (net.counters(client)["tx_bytes"] - before) / elapsed
+
+
 def test_hosts_reach_each_other_and_a_link_down_cuts_one_host_off(sink):
     """Two hosts connect over the bridge; with b's link down a cannot reach b (and b's loopback still works);
     up again, a reaches b again. The counters saw the traffic."""
@@ -90,17 +104,14 @@ def test_tbf_caps_what_a_host_sends(sink):
     assert free > 10 * CAP, free
 
 
-def test_per_link_caps_cap_each_destination_and_leave_the_others_alone(sink):
-    """``cap_links("a", ["b"], CAP)``: a TCP stream from a to b runs at the cap (as above), one from a to c —
-    a destination without a cap — at many times it; a third host's link to b is not a's bucket."""
+def test_per_link_caps_cap_each_destination_and_leave_the_others_alone():
+    """``cap_links("a", ["b"], CAP)``: UDP datagrams from a to b leave at the cap (within 35 %: a 1.5 s flood,
+    the bucket's burst), datagrams from a to c — a destination without a cap — at many times it."""
     with netns.network(["a", "b", "c"]) as net:
-        sink(net, "b")
-        sink(net, "c")
         net.cap_links("a", ["b"], CAP)
-        to_b, to_c = _stream(net, "a", "b", STREAM_S), _stream(net, "a", "c", 0.5)
-        from_c = _stream(net, "c", "b", 0.5)
+        to_b, to_c = _datagrams(net, "a", "b", STREAM_S), _datagrams(net, "a", "c", 0.5)
     assert to_b == pytest.approx(CAP, rel=0.35), to_b
-    assert to_c > 10 * CAP and from_c > 10 * CAP, (to_c, from_c)
+    assert to_c > 10 * CAP, to_c
 
 
 def test_everything_made_is_removed_also_when_the_body_raises():

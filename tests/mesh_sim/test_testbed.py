@@ -37,6 +37,8 @@ def test_link_down_specs():
     (["--tbf-burst", "9000"], "--tbf-burst must be positive bytes, with --tbf-rate; got 9000"),  # a depth, no rate
     (["--tbf-rate", "2000", "--tbf-burst", "0"], "--tbf-burst must be positive bytes, with --tbf-rate; got 0"),
     (["--tbf-per-link"], "--tbf-per-link needs --tbf-rate: the rate of each directed link"),  # a cap with no rate
+    (["--tbf-rate", "1740", "--tbf-per-link"],  # the default TCP router links through one-frame queues
+     "--tbf-per-link needs --router-link udp: its queues of one frame would drop most of a TCP stream's segments"),
     (["--lockstep"], "--lockstep runs every agent in one process: nothing to spread over hosts"),
 ])
 def test_bad_testbed_options_are_one_line_and_exit_2(argv, says, tmp_path, capsys, monkeypatch):
