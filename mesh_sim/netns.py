@@ -183,7 +183,8 @@ def _tbf(bytes_per_s: float, burst: float | None, queue: float) -> tuple[str, ..
     packets waiting for tokens; a packet that does not fit it is dropped. The queue is given as tc-tbf(8)'s
     ``limit``, not its ``latency``: tc turns a latency into ``rate × latency + burst`` bytes, so a 2 s bucket
     made a 20 ms latency a 2 s queue (measured, 8 agents under per-link caps: belief latency 1.24-1.53 s with
-    it, 0.70-0.76 s with a queue of one frame; 0.45 s under the emulated radio's). ``ValueError`` for a rate or burst that is not positive."""
+    it, 0.70-0.76 s with a queue of one frame; 0.45 s under the emulated radio's). ``ValueError`` for a rate or
+    burst that is not positive."""
     if not bytes_per_s > 0:
         raise ValueError(f"a rate cap must be positive bytes per second, got {bytes_per_s}")
     if burst is not None and not burst > 0:

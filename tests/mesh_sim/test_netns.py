@@ -52,29 +52,30 @@ def _connects(net: netns.Network, client: str, server: str) -> bool:
     return done.returncode == 0
 
 
-def _stream(net: netns.Network, client: str, server: str, seconds: float) -> float:
-    """Bytes per second ``client`` put on its veth (kernel counter) while streaming to ``server`` for ``seconds``."""
-    code = (f"import socket, time; s = socket.create_connection(('{net.host(server).address}', {PORT}), timeout=5)\n"
-            f"end = time.time() + {seconds}\nwhile time.time() < end: s.sendall(bytes(16384))\n")
+def _sent_per_s(net: netns.Network, client: str, code: str) -> float:
+    """Bytes per second ``client`` put on its veth (kernel counter) while running the Python ``code`` inside it."""
     before = net.counters(client)["tx_bytes"]
     started = time.time()
     subprocess.run([*net.exec_prefix(client), sys.executable, "-c", code], check=True, timeout=60)
     elapsed = time.time() - started
     return (net.counters(client)["tx_bytes"] - before) / elapsed
+
+
+def _stream(net: netns.Network, client: str, server: str, seconds: float) -> float:
+    """Bytes per second ``client`` sent while streaming over TCP to ``server``'s sink for ``seconds``."""
+    return _sent_per_s(net, client, (
+        f"import socket, time; s = socket.create_connection(('{net.host(server).address}', {PORT}), timeout=5)\n"
+        f"end = time.time() + {seconds}\nwhile time.time() < end: s.sendall(bytes(16384))\n"))
 
 
 def _datagrams(net: netns.Network, client: str, server: str, seconds: float) -> float:
-    """Bytes per second ``client`` put on its veth (kernel counter) while sending 1000-byte UDP datagrams to
-    ``server`` as fast as it can for ``seconds`` (no sink: what the kernel drops is dropped, as on a radio)."""
-    code = (f"import socket, time; s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n"
-            f"end = time.time() + {seconds}\nwhile time.time() < end:\n"
-            f"    try: s.sendto(bytes(1000), ('{net.host(server).address}', {PORT}))\n"
-            f"    except OSError: pass\n")
-    before = net.counters(client)["tx_bytes"]
-    started = time.time()
-    subprocess.run([*net.exec_prefix(client), sys.executable, "-c", code], check=True, timeout=60)
-    elapsed = time.time() - started
-    return (net.counters(client)["tx_bytes"] - before) / elapsed
+    """Bytes per second ``client`` sent while sending 1000-byte UDP datagrams to ``server`` as fast as it can for
+    ``seconds`` (no sink: what the kernel drops is dropped, as on a radio)."""
+    return _sent_per_s(net, client, (
+        f"import socket, time; s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n"
+        f"end = time.time() + {seconds}\nwhile time.time() < end:\n"
+        f"    try: s.sendto(bytes(1000), ('{net.host(server).address}', {PORT}))\n"
+        f"    except OSError: pass\n"))
 
 
 def test_hosts_reach_each_other_and_a_link_down_cuts_one_host_off(sink):
