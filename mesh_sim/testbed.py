@@ -81,12 +81,11 @@ def router_config(host: netns.Host, connect: list[netns.Host], link: str = "tcp"
     lose what the network drops instead of retransmitting it); connects to the routers ``connect``; no scouting,
     no gossip (every link is configured); no timestamps: a Zenoh router stamps every message it forwards by
     default (a hybrid logical clock and its id: about 25 bytes a message on every hop; nothing here reads them —
-    measured, 8 agents over UDP: the kernel's payload 1.14 × the agents' accounting with them, 1.08 × without);
-    the lease :data:`LEASE_MS`; and no shared memory: Zenoh (1.x, by
-    default) hands a message of 3 kB or more to a peer on the same machine as a reference into ``/dev/shm``,
-    which network namespaces do not separate, so the bytes would not cross the veths (measured on the
-    ``partition`` scenario, whose tracks are ~5 kB: a host's kernel tx was 0.16 × the expectation of
-    :func:`bytes_check` with it, 1.0 × without)."""
+    measured, 8 agents over UDP: the kernel's payload 1.14 × the agents' accounting with them, 1.07 × without);
+    the lease :data:`LEASE_MS`; and no shared memory: Zenoh (1.x, by default) hands a message of 3 kB or more to
+    a peer on the same machine as a reference into ``/dev/shm``, which network namespaces do not separate, so the
+    bytes would not cross the veths (measured on the ``partition`` scenario, whose tracks are ~5 kB: a host's
+    kernel tx was 0.16 × the expectation of :func:`bytes_check` with it, 1.0 × without)."""
     return {
         "mode": "router",
         "listen": {"endpoints": [f"tcp/127.0.0.1:{ROUTER_PORT}", f"{link}/{host.address}:{ROUTER_PORT}"]},

@@ -4,7 +4,7 @@ by the radio against the kernel's.
 Live runs of the default scenario with the geometric bearing sensor (the network is under test, not
 perception; the camera's rendering does not fit 8 agents and 9 routers on a shared 2-core machine), one seed,
 Rerun off; ``--quick``: the first two for 8 s with 4 agents (each live run is ~20 s of start-up on a loaded
-machine), full: all six for 40 s with 8 agents:
+machine), full: all seven for 40 s with 8 agents:
 
 * **single host** — ``skymesh run``: one Zenoh router on loopback, every process its client. The baseline.
 * **testbed** — ``skymesh testbed`` (:mod:`mesh_sim.testbed`): a namespace, a veth and a router per agent, the
@@ -177,7 +177,7 @@ def _mean(values) -> float | None:
 
 
 def _add_ratios(rows: list[dict]) -> None:
-    """Each run against the single-host run; the tbf cap against the radio cap."""
+    """Each run against the single-host run; the tbf caps against the radio cap."""
     by = {r["run"]: r for r in rows}
     for row in rows:
         against = by["radio cap"] if row["run"].startswith("tbf") else by["single host"]

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import pytest
@@ -12,6 +11,7 @@ import zenoh
 
 from agent.net.zenoh_transport import client_config
 from mesh_sim import netns, testbed
+from tests.zenoh_probe import first_sample
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 SHIPPED = sorted(DEPLOY.glob("*.json5"))
@@ -70,11 +70,5 @@ def test_a_message_crosses_two_test_bed_routers_without_a_timestamp():
         first, second = (f"tcp/127.0.0.1:{free_port()}" for _ in range(2))
         with _opened(config, [first], []), _opened(config, [second], [first]), \
                 zenoh.open(client_config([second])) as listener, zenoh.open(client_config([first])) as talker:
-            samples = listener.declare_subscriber("skymesh/test/stamp")
-            publisher = talker.declare_publisher("skymesh/test/stamp")
-            deadline = time.monotonic() + 10.0
-            while (sample := samples.try_recv()) is None:
-                assert time.monotonic() < deadline, "nothing crossed the two routers in 10 s"
-                publisher.put(b"x")
-                time.sleep(0.05)
+            sample = first_sample(listener, talker, "skymesh/test/stamp")
             assert (sample.timestamp is not None) == stamped, config
