@@ -31,7 +31,7 @@ from agent.net.link_emulator import LinkEmulator
 from agent.net.radio import RadioTransport
 from agent.net.sending import SendScheduler
 from agent.net.topology import Topology
-from agent.plugins import Views
+from agent.plugins import Views, merge_observations
 from agent.sensors.registry import sensor_from_config
 from agent.sensors.truth import WorldTruth
 from agent.traffic import TrafficLog
@@ -99,7 +99,7 @@ class Agent:
         observations: dict = {}
         for sensor in self.sensors if state.fresh else ():  # a stale pose (autopilot lost) georeferences nothing
             sensor.on_truth(truth)
-            observations.update(sensor.measure(t, state))
+            merge_observations(observations, sensor.measure(t, state))
         for exchange in self.exchanges.values():
             exchange.absorb(t, observations)
         for item in self.transport.drain():

@@ -36,6 +36,19 @@ from fusion.resync import Edge
 Observations = Mapping[str, object]
 
 
+def merge_observations(into: dict, more: Mapping[str, object]) -> None:
+    """Add one sensor's observations to the step's: lists of the same name are joined (two sensors that both
+    give ``"bearings"``, e.g. the ``[sensor]`` camera and the thermal camera's hot spots); any other name may
+    come from one sensor only (``ValueError`` names it)."""
+    for name, value in more.items():
+        if name not in into:
+            into[name] = value
+        elif isinstance(into[name], list) and isinstance(value, list):
+            into[name] = into[name] + value
+        else:
+            raise ValueError(f"two sensors give the observation {name!r}, which cannot be joined (not lists)")
+
+
 class Transport(Protocol):
     """Bytes on keys (DESIGN.md §5): :class:`agent.net.zenoh_transport.ZenohTransport`,
     :class:`agent.net.bus.BusEndpoint`, or either inside :class:`agent.net.radio.RadioTransport`."""

@@ -34,11 +34,18 @@ def score_alarms(probability: np.ndarray, geometry: GridGeometry, regions: Seque
     ``regions``: true fire regions ``{"centroid": (n, e), "area_m2": a}``; ``decoys``: ``(n, e, ...)``."""
     alarms = extract_alarms(probability, geometry, threshold)
     means = np.array([a.mean for a in alarms], float).reshape(-1, 2)
-    used = np.zeros(len(alarms), bool)
+    return {"threshold": threshold, **score_positions(means, geometry.cell, regions, decoys)}
+
+
+def score_positions(means: np.ndarray, cell: float, regions: Sequence[dict], decoys: Sequence[Sequence[float]]) -> dict:
+    """Detection, decoy rejection and localisation of alarms at ``means`` (k, 2) north, east [m]: the grid's own
+    (:func:`score_alarms`) or where the agents report them (:mod:`agent.beliefs.alarm_handoff`)."""
+    means = np.asarray(means, float).reshape(-1, 2)
+    used = np.zeros(len(means), bool)
     errors = []
     for region in regions:
         centroid = np.asarray(region["centroid"], float)
-        radius = math.sqrt(region["area_m2"] / math.pi) + MATCH_CELLS * geometry.cell
+        radius = math.sqrt(region["area_m2"] / math.pi) + MATCH_CELLS * cell
         d = np.linalg.norm(means - centroid, axis=1) if len(means) else np.empty(0)
         if d.size and d.min() <= radius:
             best = int(np.argmin(d))
@@ -47,13 +54,12 @@ def score_alarms(probability: np.ndarray, geometry: GridGeometry, regions: Seque
     rejected = 0
     for decoy in decoys:
         d = np.linalg.norm(means - np.asarray(decoy[:2], float), axis=1) if len(means) else np.empty(0)
-        near = d <= MATCH_CELLS * geometry.cell
+        near = d <= MATCH_CELLS * cell
         if not near.any():
             rejected += 1
         used |= near
     return {
-        "threshold": threshold,
-        "alarms": len(alarms),
+        "alarms": len(means),
         "fires": len(regions),
         "detected": len(errors),
         "detection_rate": len(errors) / len(regions) if regions else None,

@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from fusion.grid_geometry import GridGeometry
-from mesh_sim.fire_scoring import score_alarms
+from mesh_sim.fire_scoring import score_alarms, score_positions
 
 __all__ = ["FireWindows", "WINDOW_S"]
 
@@ -44,24 +44,30 @@ class FireWindows:
         return t + _EPS >= self.start + self.length
 
     def record(self, t: float, central: np.ndarray, agents: Mapping[str, np.ndarray], regions: Sequence[dict],
-               decoys: Sequence) -> dict:
+               decoys: Sequence, located: Mapping[str, np.ndarray] | None = None) -> dict:
         """Close the current window at ``t``: score the maps (cell probabilities) against the truth at ``t``."""
-        window = self.score(t, central, agents, regions, decoys)
+        window = self.score(t, central, agents, regions, decoys, located)
         self.series.append(window)
         self.detected = not window["before_first_detection"]
         self.start = t
         return window
 
     def score(self, t: float, central: np.ndarray, agents: Mapping[str, np.ndarray], regions: Sequence[dict],
-              decoys: Sequence) -> dict:
-        """The current window ending at ``t``, without closing it (the last partial window of a run)."""
+              decoys: Sequence, located: Mapping[str, np.ndarray] | None = None) -> dict:
+        """The current window ending at ``t``, without closing it (the last partial window of a run).
+        ``located``: each agent's alarm positions as it reports them (the hand-off of Merino Ch. 8), scored
+        under ``"located"``."""
         def scored(probability):
             return score_alarms(probability, self.geometry, regions, decoys, self.threshold)
 
         by_agent = {agent: scored(p) for agent, p in sorted(agents.items())}
         detected = self.detected or any(s["detected"] for s in by_agent.values())
-        return {"start": self.start, "end": t, "before_first_detection": not detected, "fires": len(regions),
-                "central": scored(central), "agents": by_agent}
+        window = {"start": self.start, "end": t, "before_first_detection": not detected, "fires": len(regions),
+                  "central": scored(central), "agents": by_agent}
+        if located:
+            window["located"] = {agent: score_positions(means, self.geometry.cell, regions, decoys)
+                                 for agent, means in sorted(located.items())}
+        return window
 
     def pending(self, t: float) -> bool:
         """Whether time has passed since the last closed window (a run ending between window ends)."""

@@ -20,7 +20,7 @@ from agent.beliefs.grid_config import GridConfig
 from agent.beliefs.grid_exchange import GridReceiver
 from agent.net import wire
 from agent.runtime import atomic_file
-from mesh_sim.fire_scoring import roc
+from mesh_sim.fire_scoring import roc, score_positions
 from mesh_sim.fire_windows import FireWindows
 
 #: ``truth(t) -> (fire regions, decoys)`` at simulation time ``t`` (:func:`mesh_sim.fire_scoring.score_alarms`)
@@ -39,6 +39,7 @@ class GridOracle:
         self.central = self.beliefs.uniform()
         self.receiver = GridReceiver(self.geometry.shape, self.beliefs.layers)
         self.agents: dict[str, object] = {}  # agent -> its latest grid as broadcast
+        self.located: dict[str, np.ndarray] = {}  # agent -> (k, 2) its alarms where its telemetry reports them
         self.kl: dict[str, list[tuple[float, float]]] = {}  # agent -> [(t, KL)]
         self.rejected = 0
         self._next_eval = 0.0
@@ -70,11 +71,24 @@ class GridOracle:
         except (wire.DecodeError, ValueError, AttributeError):
             self.rejected += 1
 
+    def add_located(self, agent: str, alarms) -> None:
+        """An agent's alarms as its telemetry reports them (``[{"mean": (north, east), ...}]``, located by the
+        hand-off of :mod:`agent.beliefs.alarm_handoff`). A malformed list is counted in ``rejected`` and
+        changes nothing."""
+        try:
+            means = np.array([a["mean"] for a in alarms], float).reshape(-1, 2)
+            if not np.isfinite(means).all():
+                raise ValueError("non-finite alarm position")
+        except (KeyError, TypeError, ValueError, IndexError):
+            self.rejected += 1
+            return
+        self.located[agent] = means
+
     def evaluate(self, t: float) -> None:
         """KL samples every ``EVAL_PERIOD``; the window scores at the end of every window."""
         self.now = t
         if self.windows.due(t):
-            self.windows.record(t, *self._maps(), *self.truth(t))
+            self.windows.record(t, *self._maps(), *self.truth(t), self.located)
         if t + 1e-9 < self._next_eval:
             return
         self._next_eval = t + EVAL_PERIOD
@@ -103,12 +117,15 @@ class GridOracle:
         truth now (``regions``, ``decoys``), and the per-window scores (a last partial window up to now)."""
         windows = list(self.windows.series)
         if self.windows.pending(self.now):
-            windows.append(self.windows.score(self.now, *self._maps(), regions, decoys))
+            windows.append(self.windows.score(self.now, *self._maps(), regions, decoys, self.located))
 
         def scores(grid) -> list[dict]:
             return roc(grid.probability(), self.geometry, regions, decoys)
 
+        located = {agent: score_positions(means, self.geometry.cell, regions, decoys)
+                   for agent, means in sorted(self.located.items())}
         return {
+            **({"located": located} if located else {}),
             "belief": self.config.belief,
             "cells": self.geometry.size,
             "rejected": self.rejected,

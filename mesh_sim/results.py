@@ -149,12 +149,15 @@ def grid_fleet(agents: list[dict], grid: dict, sc) -> dict:
         return float(np.mean(values)) if values else None
 
     kl = [a["kl_final"] for a in grid["agents"].values() if a["kl_final"] is not None]
+    located = [r["localisation_error_m"] for r in grid.get("located", {}).values()
+               if r["localisation_error_m"] is not None]
     grid_bytes = [a["grid"]["grid_bytes"] for a in agents if "grid" in a]
     return {
         "threshold": threshold,
         "detection_rate": mean("detection_rate"),
         "false_alarm_rejection": mean("false_alarm_rejection"),
         "localisation_error_m": mean("localisation_error_m"),
+        "reported_localisation_error_m": float(np.mean(located)) if located else None,
         "other_false_alarms": mean("other_false_alarms"),
         "kl_to_central": float(np.mean(kl)) if kl else None,
         "grid_bytes_per_agent_per_s": float(np.mean(grid_bytes)) / sc.duration if grid_bytes else None,
@@ -162,27 +165,30 @@ def grid_fleet(agents: list[dict], grid: dict, sc) -> dict:
 
 
 def grid_table(metrics: dict) -> Table | None:
-    """Per agent: its fire map against the truth and the centralized map (``None`` without a grid)."""
+    """Per agent: its fire map against the truth and the centralized map, and its alarms where it reports them
+    (the hand-off of ``[grid] handoff``: at their tracks) (``None`` without a grid)."""
     grid = metrics["oracle"].get("grid")
     if not grid:
         return None
     threshold = metrics["fleet"]["grid"]["threshold"]
     table = Table(title=f"fire map — alarms at p > {threshold:g}")
-    for col in ("agent", "fires found", "decoys ignored", "other alarms", "loc. error [m]", "KL to central",
-                "grid [B/s]", "grid msgs (key)"):
+    for col in ("agent", "fires found", "decoys ignored", "other alarms", "loc. error [m]", "reported loc. [m]",
+                "KL to central", "grid [B/s]", "grid msgs (key)"):
         table.add_column(escape(col), justify="right", overflow="fold")
     duration = metrics["config"]["duration"]
     by_id = {a["id"]: a for a in metrics["agents"]}
     for agent, g in grid["agents"].items():
         r = next(x for x in g["roc"] if x["threshold"] == threshold)
         m = by_id.get(agent, {}).get("grid", {})
+        reported = grid.get("located", {}).get(agent, {}).get("localisation_error_m")
         table.add_row(agent, f"{r['detected']}/{r['fires']}", f"{r['decoys_rejected']}/{r['decoys']}",
-                      str(r["other_false_alarms"]), _fmt(r["localisation_error_m"], ".2f"), _fmt(g["kl_final"], ".1f"),
+                      str(r["other_false_alarms"]), _fmt(r["localisation_error_m"], ".2f"), _fmt(reported, ".2f"),
+                      _fmt(g["kl_final"], ".1f"),
                       _fmt(m.get("grid_bytes", 0) / duration, ",.0f"),
                       f"{m.get('grid_messages', 0)} ({m.get('grid_keyframes', 0)})")
     r = next(x for x in grid["central"]["roc"] if x["threshold"] == threshold)
     table.add_row("central", f"{r['detected']}/{r['fires']}", f"{r['decoys_rejected']}/{r['decoys']}",
-                  str(r["other_false_alarms"]), _fmt(r["localisation_error_m"], ".2f"), "0", "", "", style="dim")
+                  str(r["other_false_alarms"]), _fmt(r["localisation_error_m"], ".2f"), "", "0", "", "", style="dim")
     return table
 
 

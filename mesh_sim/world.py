@@ -107,6 +107,8 @@ class World:
             if env.kind == "telemetry":
                 self._note_position(env)
                 self.traces.on_telemetry(env.origin, env.stamp, env.payload)
+                if self.grid_oracle is not None and "alarms" in env.payload:
+                    self.grid_oracle.add_located(env.origin, env.payload["alarms"])
             elif env.kind in ("grid", "grid_evidence"):
                 if self.grid_oracle is not None:
                     (self.grid_oracle.add_grid if env.kind == "grid" else self.grid_oracle.add_evidence)(env)

@@ -61,7 +61,8 @@ def _grid(ctx: ExchangeContext) -> BeliefExchange | None:
         return None
     from agent.beliefs.grids import GridExchange  # the thermal camera's image code, only for a [grid]
 
-    return GridExchange(ctx.me, sc.grid, sc.area.as_tuple(), ctx.terrain, ctx.seed + 7919, ctx.outbox)
+    return GridExchange(ctx.me, sc.grid, sc.area.as_tuple(), ctx.terrain, ctx.seed + 7919, ctx.outbox,
+                        tracker=ctx.shared.get("tracker"))
 
 
 def _tasks(ctx: ExchangeContext) -> BeliefExchange | None:

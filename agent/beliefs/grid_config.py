@@ -34,6 +34,7 @@ class GridConfig:
     half_life: float = 0.0  # s: evidence forgetting on the common clock (fusion.grid_forgetting); 0: static grid
     plan_spread: float = 0.0  # planning only: omega of (6.6) per planning step (0: plan on the map as it is)
     plan_steps: int = 4  # planning only: fire-spread steps predicted before the entropy is computed (chosen here)
+    handoff: bool = False  # alarms located by the tracker from the thermal camera's hot spots (Merino Ch. 8)
     detection: DetectionModel = field(default_factory=DetectionModel)
     pose_noise: PoseNoise = field(default_factory=PoseNoise)
     camera: FireCameraConfig = field(default_factory=FireCameraConfig)
@@ -57,6 +58,8 @@ class GridConfig:
             raise ValueError(f"grid.plan_spread must be a probability, got {self.plan_spread!r}")
         if isinstance(self.plan_steps, bool) or not isinstance(self.plan_steps, int) or self.plan_steps < 1:
             raise ValueError(f"grid.plan_steps must be a positive integer, got {self.plan_steps!r}")
+        if not isinstance(self.handoff, bool):
+            raise ValueError(f"grid.handoff must be true or false, got {self.handoff!r}")
         check_tolerance(self.delta_tolerance, "grid.delta_tolerance")
         if self.belief == "beta" and self.delta_tolerance > 0.0:  # measured: the exact filters fell back on a tree
             raise ValueError("grid.delta_tolerance must be 0 for belief = 'beta': counts held within a deadband make "

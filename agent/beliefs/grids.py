@@ -16,9 +16,13 @@ weighted log-odds at the Chernoff point, or Merino's max rules (4.5)/(4.39).
 * **receive**: decode (geometry and belief type must match ours), fuse through the channel filter;
 * **view**: the map the explorer plans on (:class:`tasking.base.MapView`);
 * **alarms**: every ``alarm_period`` the fused grid is thresholded into Gaussian alarms (Merino (4.20),
-  :func:`fusion.grid_alarms.extract_alarms`) with their class probability — the hand-off to the
-  information-filter layer of Merino's hybrid scheme (Ch. 8). They are re-extracted from the grid each
-  time, never accumulated, so the grid's evidence is not counted twice.
+  :func:`fusion.grid_alarms.extract_alarms`) with their class probability. They are re-extracted from the grid
+  each time, never accumulated, so the grid's evidence is not counted twice.
+* **hand-off** (``handoff``, Merino Ch. 8): the thermal camera's hot spots inside an alarm's gate go to the
+  agent's tracker as bearings (:mod:`agent.sensors.hot_spots`), whose tracks are fused with the peers' like
+  target tracks; every alarm is reported (telemetry, metrics) at its track's position
+  (:mod:`agent.beliefs.alarm_handoff`). Position and class are separate filters, as in (8.1): the grid only
+  gates which blobs count, and nothing of the tracks goes back into the grid, so nothing is counted twice.
 """
 
 from __future__ import annotations
@@ -27,13 +31,16 @@ from collections import Counter
 
 import numpy as np
 
+from agent.beliefs.alarm_handoff import located_alarms
 from agent.beliefs.grid_config import GridConfig
 from agent.beliefs.grid_exchange import HISTORY, GridReceiver, GridSender
+from agent.beliefs.tracking import Tracker
 from agent.net import wire
 from agent.net.grid_codec import encoded_size
 from agent.net.sending import Every
 from agent.plugins import Observations, Outbox, Outgoing
 from agent.sensors.fire_camera import FireCamera, ThermalSensor
+from agent.sensors.hot_spots import HotSpots
 from agent.sensors.truth import TruthSnapshot
 from fusion.channel_filter import ChannelFilter
 from fusion.fire_spread import FireSpreadModel
@@ -52,7 +59,7 @@ class GridExchange:
     kind = "grid"
 
     def __init__(self, me: str, config: GridConfig, area: tuple[float, float, float, float], terrain, seed: int,
-                 outbox: Outbox):
+                 outbox: Outbox, tracker: Tracker | None = None):
         self.me = me
         self.config = config
         self.outbox = outbox
@@ -64,9 +71,16 @@ class GridExchange:
                                       history=HISTORY)
         self.sender = GridSender(config.keyframe_every, config.delta, tolerance=config.delta_tolerance)
         self.receiver = GridReceiver(self.geometry.shape, self.beliefs.layers)
-        self.sensor = ThermalSensor(FireCamera(config.camera, config.detection, config.pose_noise, seed),
-                                    self.geometry.centres_ned(), self.geometry.cell, terrain)
+        camera = FireCamera(config.camera, config.detection, config.pose_noise, seed)
+        if config.handoff and tracker is None:
+            raise ValueError("grid.handoff needs the agent's tracker to locate the alarms")
+        self.tracker = tracker if config.handoff else None
+        hot_spots = HotSpots(camera.intrinsics, config.pose_noise.attitude_sigma, self.geometry.cell,
+                             terrain) if config.handoff else None
+        self.sensor = ThermalSensor(camera, self.geometry.centres_ned(), self.geometry.cell, terrain, hot_spots,
+                                    alarms=lambda: self.alarms)
         self.alarms: list[Alarm] = []
+        self.located: list[dict] = []  # the alarms where they are reported: agent.beliefs.alarm_handoff
         self._send_timer = Every(config.period)
         self._alarm_timer = Every(config.alarm_period)
         self.fusions: Counter = Counter()  # method -> grids fused
@@ -120,8 +134,12 @@ class GridExchange:
         return np.maximum(p, model.predict(known, np.zeros_like(p), self.config.plan_steps)[0])
 
     def update_alarms(self, t: float) -> list[Alarm]:
+        """Every ``alarm_period``, the grid's alarms (4.20); every step, where they are: with ``handoff``, at their
+        tracks (:func:`agent.beliefs.alarm_handoff.located_alarms`)."""
         if self._alarm_timer.due(t):
             self.alarms = extract_alarms(self.probability(), self.geometry, self.config.alarm_threshold)
+        tracks = self.tracker.estimates() if self.tracker is not None else []
+        self.located = located_alarms(self.alarms, tracks, self.geometry.cell)
         return self.alarms
 
     # -- exchange ---------------------------------------------------------------------------------
@@ -191,7 +209,7 @@ class GridExchange:
         return MapView(self.planning_probability(), self.geometry.centres(), beta)
 
     def telemetry(self) -> dict:
-        return {"alarms": [{"mean": a.mean, "cov": a.cov, "probability": a.probability} for a in self.alarms]}
+        return {"alarms": self.located}
 
     def evaluate(self, t: float, truth: TruthSnapshot) -> None:
         """The map is scored by the simulator against its centralized map (:mod:`mesh_sim.grid_oracle`)."""
@@ -210,5 +228,7 @@ class GridExchange:
             "grid_fusions": dict(self.fusions),
             "alarms": [{"mean": a.mean.tolist(), "cov": a.cov.tolist(), "probability": a.probability,
                         "cells": a.cells} for a in self.alarms],
+            "located_alarms": [{"mean": a["mean"].tolist(), "cov": a["cov"].tolist(), "track": a["track"]}
+                               for a in self.located],
             "thinned": self.grids_thinned,
         }}

@@ -6,16 +6,20 @@ single frames the way sun glints and hot rocks do), segment it by a temperature 
 segmentation of Merino App. B; a threshold stands in for the thesis's ANFIS), and turn the binary mask
 into per-cell likelihoods with the pose the telemetry reports (the true pose plus white pose noise of
 the size the likelihood model assumes): Merino (4.9)-(4.15) and the Beta pseudo-counts (4.31),
-through :func:`perception.grid_likelihood.camera_cell_evidence`.
+through :func:`perception.grid_likelihood.camera_cell_evidence`. With a hand-off (``[grid] handoff``) the same
+mask's blobs in the gates of the grid's alarms also become bearings (:mod:`agent.sensors.hot_spots`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from agent.sensors.fire_camera_config import FireCameraConfig
+from agent.sensors.hot_spots import HotSpots
+from fusion.grid_alarms import Alarm
 from perception.grid_likelihood import CellEvidence, camera_cell_evidence
 from perception.grid_sensor_model import DetectionModel, PoseNoise
 from perception.pose import CameraPose, Gimbal
@@ -38,10 +42,10 @@ class FireCamera:
         self.frames = 0
         self.fire_pixels = 0
 
-    def evidence(self, state, fires: list[Fire], decoys: list[tuple[float, float, float]], cells_ned: np.ndarray,
-                 cell: float, terrain=None) -> CellEvidence:
-        """Cell evidence of the frame seen from vehicle ``state``; ``decoys`` are (north, east, probability
-        of showing in a frame) of hot spots ``DECOY_SIZE_M`` across."""
+    def look(self, state, fires: list[Fire], decoys: list[tuple[float, float, float]],
+             terrain=None) -> tuple[np.ndarray, CameraPose]:
+        """One frame seen from vehicle ``state``, segmented: its fire mask and the pose the telemetry reports.
+        ``decoys`` are (north, east, probability of showing in a frame) of hot spots ``DECOY_SIZE_M`` across."""
         true_pose = CameraPose.from_vehicle(state.position, state.roll, state.pitch, state.yaw, self.gimbal)
         shown = [Fire((n, e), DECOY_SIZE_M, self.config.decoy_K) for n, e, p in decoys if self.rng.random() < p]
         level = getattr(terrain, "level", None)
@@ -52,8 +56,17 @@ class FireCamera:
         mask = frame.thermal > self.config.threshold_K
         self.frames += 1
         self.fire_pixels += int(mask.sum())
-        return camera_cell_evidence(mask, cells_ned, cell, self._reported_pose(state), self.intrinsics,
-                                    self.model, self.noise)
+        return mask, self._reported_pose(state)
+
+    def cell_evidence(self, mask: np.ndarray, pose: CameraPose, cells_ned: np.ndarray, cell: float) -> CellEvidence:
+        """The evidence of a segmented frame on the cells (Merino (4.9)-(4.15), (4.31))."""
+        return camera_cell_evidence(mask, cells_ned, cell, pose, self.intrinsics, self.model, self.noise)
+
+    def evidence(self, state, fires: list[Fire], decoys: list[tuple[float, float, float]], cells_ned: np.ndarray,
+                 cell: float, terrain=None) -> CellEvidence:
+        """Cell evidence of the frame seen from vehicle ``state`` (:meth:`look`, then :meth:`cell_evidence`)."""
+        mask, pose = self.look(state, fires, decoys, terrain)
+        return self.cell_evidence(mask, pose, cells_ned, cell)
 
     def _reported_pose(self, state) -> CameraPose:
         """The pose the telemetry reports: the truth plus the noise the likelihood model accounts for."""
@@ -67,13 +80,17 @@ class FireCamera:
 class ThermalSensor:
     """The fire camera as a sensor of the agent (:class:`agent.plugins.Sensor`): each step, one frame of the
     simulated fire seen from the vehicle, as cell evidence (``"fire_evidence"``) on the grid whose cell
-    centres (NED) and side it was built for."""
+    centres (NED) and side it was built for; with ``hot_spots``, also the frame's fire blobs inside the gates
+    of the grid's current ``alarms()`` as ``"bearings"`` (:mod:`agent.sensors.hot_spots`, Merino Ch. 8)."""
 
-    def __init__(self, camera: FireCamera, cells_ned: np.ndarray, cell: float, terrain):
+    def __init__(self, camera: FireCamera, cells_ned: np.ndarray, cell: float, terrain,
+                 hot_spots: HotSpots | None = None, alarms: Callable[[], list[Alarm]] = list):
         self.camera = camera
         self.cells_ned = cells_ned
         self.cell = cell
         self.terrain = terrain
+        self.hot_spots = hot_spots
+        self.alarms = alarms
         self._fires: list[Fire] = []
         self._decoys: list[tuple[float, float, float]] = []
 
@@ -81,8 +98,11 @@ class ThermalSensor:
         self._fires, self._decoys = truth.fires, truth.decoys
 
     def measure(self, t: float, state) -> dict:
-        return {"fire_evidence": self.camera.evidence(state, self._fires, self._decoys, self.cells_ned, self.cell,
-                                                      self.terrain)}
+        mask, pose = self.camera.look(state, self._fires, self._decoys, self.terrain)
+        out = {"fire_evidence": self.camera.cell_evidence(mask, pose, self.cells_ned, self.cell)}
+        if self.hot_spots is not None:
+            out["bearings"] = self.hot_spots.bearings(t, mask, pose, self.alarms())
+        return out
 
     def telemetry(self) -> dict:
         return {}
@@ -91,7 +111,10 @@ class ThermalSensor:
         """A planner's gimbal command: ignored (the thermal camera keeps its configured pointing)."""
 
     def metrics(self) -> dict:
-        return {"frames": self.camera.frames}
+        out = {"frames": self.camera.frames}
+        if self.hot_spots is not None:
+            out["hot_spots"] = {"bearings": self.hot_spots.kept, "outside_alarms": self.hot_spots.outside}
+        return out
 
     def close(self) -> None:
         pass

@@ -19,7 +19,9 @@ Goals (issue 15): in every window after the first detection (after the first win
 agent's map, in any seed, has detected a fire — that window holds time before it; every window if none ever
 did), pooled over agents and seeds, for hybrid log-odds and hybrid Beta:
 detection ≥ 95 %, false-alarm (decoy) rejection ≥ 80 % and localisation error < 1 m (Merino 001b §4.4,
-the COMETS field figures); naive fusion shows at least one decoy-made false alarm across the seeds; grid
+the COMETS field figures) — judged both for the grid's own alarms (4.20) and for the alarms where the agents
+report them (the hand-off of Merino Ch. 8, ``[grid] handoff``: at the tracks of their hot spots,
+:mod:`agent.beliefs.alarm_handoff`); naive fusion shows at least one decoy-made false alarm across the seeds; grid
 bytes delta ÷ keyframe ≤ 0.2 on the full mesh and on the ring (the tree's ratio is reported).
 """
 
@@ -127,6 +129,8 @@ def window_rows(config: str, outcomes: list[dict]) -> list[dict]:
         windows = [o["windows"][index] for o in outcomes if index < len(o["windows"])]
         scores = [s for w in windows for s in w["agents"].values()]
         errors = [s["localisation_error_m"] for s in scores if s["localisation_error_m"] is not None]
+        located = [s["localisation_error_m"] for w in windows for s in w.get("located", {}).values()
+                   if s["localisation_error_m"] is not None]
         rows.append({
             "config": config, "window": index, "start": windows[0]["start"], "end": windows[0]["end"],
             "runs": len(windows), "maps": len(scores),
@@ -137,6 +141,8 @@ def window_rows(config: str, outcomes: list[dict]) -> list[dict]:
             "other_false_alarms": _mean(s["other_false_alarms"] for s in scores),
             "localisation_error_m": _mean(errors),
             "localisation_worst_m": max(errors, default=None),
+            "located_error_m": _mean(located),
+            "located_worst_m": max(located, default=None),
         })
     return rows
 
@@ -158,11 +164,13 @@ def goals(rows: list[dict], bytes_per_s: dict[str, float | None]) -> list[dict]:
         after = windows_after_first_detection(windows)
         for key, label, higher in (("detection_rate", "detection", True),
                                    ("false_alarm_rejection", "false-alarm rejection", True),
-                                   ("localisation_error_m", "localisation (m)", False)):
+                                   ("localisation_error_m", "grid alarm localisation (m)", False),
+                                   ("located_error_m", "reported alarm localisation (m)", False)):
             values = [r[key] for r in after if r[key] is not None]
             worst = (min if higher else max)(values, default=None)
-            ok = None if worst is None else (worst >= GOALS[key] if higher else worst < GOALS[key])
-            out.append({"goal": f"{config}: {label} {'>=' if higher else '<'} {GOALS[key]:g} in every window "
+            bound = GOALS[key if key in GOALS else "localisation_error_m"]
+            ok = None if worst is None else (worst >= bound if higher else worst < bound)
+            out.append({"goal": f"{config}: {label} {'>=' if higher else '<'} {bound:g} in every window "
                                 f"after the first detection (worst window)", "value": worst, "ok": ok})
     for config in ("naive", "naive-beta"):
         naive = [r for r in rows if r["config"] == config]
@@ -196,11 +204,12 @@ def report(result: dict, console=None) -> None:
     common.print_table(
         console, f"fire missions — {s['seeds']} seed(s) x {s['duration']:g} s, lockstep, agents' maps per window",
         ["config", "window (s)", "maps", "detection", "decoys rejected", "decoy alarms", "other false/map",
-         "loc. mean (m)", "loc. worst (m)", "grid bytes/agent/s"],
+         "grid loc. mean (m)", "grid loc. worst (m)", "reported loc. mean (m)", "reported loc. worst (m)",
+         "grid bytes/agent/s"],
         [(r["config"], f"{r['start']:g}-{r['end']:g}" + _mark(r, result["rows"]),
           r["maps"], fmt(r["detection_rate"], ".0%"), fmt(r["false_alarm_rejection"], ".0%"), r["decoy_alarms"],
           fmt(r["other_false_alarms"], ".2f"), fmt(r["localisation_error_m"], ".2f"),
-          fmt(r["localisation_worst_m"], ".2f"),
+          fmt(r["localisation_worst_m"], ".2f"), fmt(r["located_error_m"], ".2f"), fmt(r["located_worst_m"], ".2f"),
           fmt(result["grid_bytes_per_agent_per_s"][r["config"]], ",.0f") if r["window"] == 0 else "")
          for r in result["rows"]],
         caption=MERINO,

@@ -113,3 +113,13 @@ def test_the_in_process_harness_never_loads_zenoh():
             "sys.exit(1 if 'zenoh' in sys.modules else 0)")
     result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr or "zenoh was imported"
+
+
+def test_observations_of_one_name_from_two_sensors_are_joined_when_they_are_lists():
+    """The [sensor] camera's bearings and the thermal camera's hot spots both go to the tracker."""
+    step = {"bearings": ["camera"], "fire_evidence": "frame"}
+    plugins.merge_observations(step, {"bearings": ["hot spot"], "clock": 1.0})
+    assert step == {"bearings": ["camera", "hot spot"], "fire_evidence": "frame", "clock": 1.0}
+    with pytest.raises(ValueError, match="'fire_evidence'"):  # two thermal frames cannot be added up
+        plugins.merge_observations(step, {"fire_evidence": "another frame"})
+    assert step["fire_evidence"] == "frame"

@@ -27,15 +27,17 @@ def test_the_quick_mode_writes_per_window_rows_as_json(quick):
     for row in quick["rows"]:
         assert row["runs"] == 1 and row["maps"] == 4
         assert set(row) >= {"detection_rate", "false_alarm_rejection", "decoy_alarms", "other_false_alarms",
-                            "localisation_error_m", "localisation_worst_m", "before_first_detection"}
+                            "localisation_error_m", "localisation_worst_m", "located_error_m", "located_worst_m",
+                            "before_first_detection"}
         assert 0.0 <= row["detection_rate"] <= 1.0 and 0.0 <= row["false_alarm_rejection"] <= 1.0
     assert all(quick["grid_bytes_per_agent_per_s"][c] > 0 for c in fire.QUICK["configs"])
     assert {g["goal"].split(":")[0] for g in quick["goals"]} == set(fire.QUICK["configs"])
 
 
-def _row(config, window, *, detection=1.0, rejection=1.0, error=0.5, decoy_alarms=0, before=False):
+def _row(config, window, *, detection=1.0, rejection=1.0, error=0.5, located=0.5, decoy_alarms=0, before=False):
     return {"config": config, "window": window, "before_first_detection": before, "detection_rate": detection,
-            "false_alarm_rejection": rejection, "localisation_error_m": error, "decoy_alarms": decoy_alarms}
+            "false_alarm_rejection": rejection, "localisation_error_m": error, "located_error_m": located,
+            "decoy_alarms": decoy_alarms}
 
 
 def _verdicts(rows, bytes_per_s=None):
@@ -45,13 +47,15 @@ def _verdicts(rows, bytes_per_s=None):
 def test_the_windowed_goals_pass_when_every_window_after_the_first_detection_meets_them():
     # the window that saw the first detection (1) holds time before it: it is not judged
     rows = [_row("hybrid", 0, detection=0.0, error=None, before=True),
-            _row("hybrid", 1, detection=0.3, rejection=0.5, error=3.0), _row("hybrid", 2), _row("hybrid", 3),
-            _row("hybrid-beta", 0, detection=0.2), _row("hybrid-beta", 1, detection=0.96, rejection=0.8, error=0.99)]
+            _row("hybrid", 1, detection=0.3, rejection=0.5, error=3.0, located=3.0),
+            _row("hybrid", 2), _row("hybrid", 3),
+            _row("hybrid-beta", 0, detection=0.2),
+            _row("hybrid-beta", 1, detection=0.96, rejection=0.8, error=0.99, located=0.99)]
     verdicts = _verdicts(rows)
-    assert len(verdicts) == 6 and all(verdicts.values())
+    assert len(verdicts) == 8 and all(verdicts.values())
 
 
-@pytest.mark.parametrize("bad", [{"detection": 0.9}, {"rejection": 0.75}, {"error": 1.0}])
+@pytest.mark.parametrize("bad", [{"detection": 0.9}, {"rejection": 0.75}, {"error": 1.0}, {"located": 1.0}])
 def test_one_window_after_the_first_detection_missing_a_goal_is_a_miss(bad):
     rows = [_row("hybrid", 0), _row("hybrid", 1), _row("hybrid", 2, **bad), _row("hybrid", 3)]
     verdicts = _verdicts(rows)
@@ -59,10 +63,10 @@ def test_one_window_after_the_first_detection_missing_a_goal_is_a_miss(bad):
 
 
 def test_a_mission_that_never_detects_misses_the_detection_goal():
-    rows = [_row("hybrid-beta", w, detection=0.0, error=None, before=True) for w in range(4)]
+    rows = [_row("hybrid-beta", w, detection=0.0, error=None, located=None, before=True) for w in range(4)]
     goals = {g["goal"].split(" ")[1]: g for g in fire.goals(rows, {})}
     assert goals["detection"]["ok"] is False and goals["detection"]["value"] == 0.0
-    assert goals["localisation"]["ok"] is None  # no alarm, no figure
+    assert goals["grid"]["ok"] is None and goals["reported"]["ok"] is None  # no alarm, no figure
 
 
 def test_naive_must_show_a_decoy_made_false_alarm():
@@ -86,16 +90,19 @@ def test_window_rows_pool_agents_and_seeds():
         return {"detection_rate": detected / 3, "false_alarm_rejection": rejected / 3, "decoys": 3,
                 "decoys_rejected": rejected, "other_false_alarms": 0, "localisation_error_m": error}
 
-    def window(before, *scores):
+    def window(before, *scores, located=()):
         return {"start": 0.0, "end": 30.0, "before_first_detection": before,
-                "agents": {f"uav{i}": s for i, s in enumerate(scores)}}
+                "agents": {f"uav{i}": s for i, s in enumerate(scores)},
+                "located": {f"uav{i}": s for i, s in enumerate(located)}}
 
-    outcomes = [{"windows": [window(False, score(3, 0.5, 3), score(0, None, 2))]},
-                {"windows": [window(True, score(0, None, 3), score(0, None, 3))]}]
+    outcomes = [{"windows": [window(False, score(3, 0.5, 3), score(0, None, 2),
+                                    located=(score(3, 0.2, 3), score(0, None, 2)))]},
+                {"windows": [window(True, score(0, None, 3), score(0, None, 3), located=(score(1, 0.6, 3),))]}]
     (row,) = fire.window_rows("hybrid", outcomes)
     assert row["maps"] == 4 and row["runs"] == 2 and not row["before_first_detection"]
     assert row["detection_rate"] == pytest.approx(0.25) and row["decoy_alarms"] == 1
     assert row["localisation_error_m"] == 0.5 and row["localisation_worst_m"] == 0.5
+    assert row["located_error_m"] == pytest.approx(0.4) and row["located_worst_m"] == 0.6
 
 
 def test_an_unknown_configuration_is_an_error():

@@ -68,6 +68,26 @@ def results_thresholds():
     return THRESHOLDS
 
 
+def test_alarms_are_located_by_the_hot_spots_tracks_and_fused_exactly_on_the_tree(lockstep_run):
+    """The hand-off (Merino Ch. 8): the thermal camera's hot spots in an alarm's gate feed the tracker, and the
+    alarms are reported at their tracks. Two agents on a line share one tree edge, so their tracks, fused by
+    channel filters, hold the same information: both report every located alarm at the same position."""
+    _, metrics = lockstep_run
+    located = {}
+    for agent in metrics["agents"]:
+        assert agent["grid"]["hot_spots"]["bearings"] > 0
+        assert agent["fusions"].get("exact", 0) > 0 and agent["fusions"].get("ci", 0) == 0
+        located[agent["id"]] = sorted(tuple(a["mean"]) for a in agent["grid"]["located_alarms"]
+                                       if a["track"] is not None)
+    assert len(located["uav0"]) >= 1
+    np.testing.assert_allclose(located["uav0"], located["uav1"], atol=1e-6)
+    regions = metrics["oracle"]["grid"]["fire_regions"]
+    errors = [min(np.hypot(n - r["centroid"][0], e - r["centroid"][1]) for r in regions) for n, e in located["uav0"]]
+    assert min(errors) < 0.5  # a located alarm sits on its fire, well inside the 5 m cell
+    scored = metrics["oracle"]["grid"]["located"]
+    assert set(scored) == {"uav0", "uav1"} and scored["uav0"]["detected"] >= 1
+
+
 def test_the_fire_map_table_prints(lockstep_run):
     _, metrics = lockstep_run
     out = io.StringIO()

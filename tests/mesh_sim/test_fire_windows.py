@@ -77,3 +77,24 @@ def test_the_grid_oracle_scores_each_window_against_the_truth_of_its_time():
     errors = [w["central"]["localisation_error_m"] for w in summary["windows"]]
     assert errors == pytest.approx([6.0, 9.0, 10.0])  # the true centroid moved; the alarm stayed at (25, 35)
     assert all(w["before_first_detection"] for w in summary["windows"])  # no agent map was broadcast
+
+
+def test_alarms_where_the_agents_report_them_are_scored_per_window_and_bad_reports_change_nothing():
+    """The hand-off (Merino Ch. 8): the positions in each agent's telemetry are scored like the grid's alarms."""
+    oracle = GridOracle(GridConfig(cell=10.0), (0.0, 100.0, 0.0, 100.0), None, lambda t: ([FIRE], [DECOY]))
+    oracle.add_located("uav0", [{"mean": np.array([28.5, 35.0]), "cov": np.eye(2), "track": 4}])
+    oracle.add_located("uav1", [{"mean": [27.0, 34.0]}, {"mean": list(DECOY[:2])}])  # a decoy reported as a fire
+    for bad in ([{"mean": [np.nan, 1.0]}],  # a NaN position
+                [{"cov": np.eye(2)}],  # no position
+                [{"mean": [1.0, 2.0, 3.0]}],  # three coordinates
+                "alarms"):  # not a list of alarms
+        oracle.add_located("uav0", bad)
+    assert oracle.rejected == 4
+    for k in range(0, 151):
+        oracle.evaluate(k * 0.2)
+    (window,) = oracle.windows.series
+    assert window["located"]["uav0"]["localisation_error_m"] == pytest.approx(0.5)  # the good report stood
+    assert window["located"]["uav0"]["decoys_rejected"] == 1
+    assert window["located"]["uav1"]["localisation_error_m"] == pytest.approx(np.hypot(1.0, 1.0))
+    assert window["located"]["uav1"]["decoys_rejected"] == 0
+    assert oracle.summary([FIRE], [DECOY])["located"]["uav0"]["detected"] == 1

@@ -86,7 +86,10 @@ def test_the_fire_map_table_fits(width):
     roc = {"threshold": 0.8, "detected": 3, "fires": 3, "decoys_rejected": 3, "decoys": 3, "other_false_alarms": 0,
            "localisation_error_m": 2.73}
     fire = {**metrics([agent("uav0", 1.0)]), "config": {"duration": DURATION}}
-    fire["oracle"]["grid"] = {"agents": {"uav0": {"roc": [roc], "kl_final": 40.0}}, "central": {"roc": [roc]}}
+    fire["oracle"]["grid"] = {"agents": {"uav0": {"roc": [roc], "kl_final": 40.0}}, "central": {"roc": [roc]},
+                              "located": {"uav0": {**roc, "localisation_error_m": 0.42}}}
     fire["fleet"]["grid"] = {"threshold": 0.8}
     lines = render(grid_table(fire), width)
     assert max(len(line) for line in lines) <= width and "…" not in "\n".join(lines)
+    text = "\n".join(lines)
+    assert "0.42" in text and "2.73" in text  # where the agent reports its alarms, beside its grid's own

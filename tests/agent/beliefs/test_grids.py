@@ -156,7 +156,13 @@ def test_the_explorer_plans_on_a_predicted_spread_but_the_shared_map_stays_stati
 
 @pytest.mark.parametrize("bad", [{"belief": "gaussian"}, {"policy": "bogus"}, {"cell": -1.0}, {"alarm_threshold": 1.5},
                                  {"keyframe_every": 0}, {"intersect": "min"}, {"colour": "red"}, {"pd": 0.01},
-                                 {"plan_spread": 1.5}, {"plan_steps": 0}])
+                                 {"plan_spread": 1.5}, {"plan_steps": 0}, {"handoff": "yes"}, {"handoff": 1}])
 def test_bad_grid_settings_are_clear_errors(bad):
     with pytest.raises(ValueError):
         GridConfig.from_dict(bad)
+
+
+def test_a_hand_off_without_a_tracker_is_a_clear_error():
+    """``[grid] handoff`` locates alarms with the agent's tracker: an exchange built without one cannot."""
+    with pytest.raises(ValueError, match="handoff needs the agent's tracker"):
+        GridExchange("uav0", GridConfig(handoff=True), AREA, FlatTerrain(), seed=1, outbox=None)

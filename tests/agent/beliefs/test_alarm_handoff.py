@@ -1,0 +1,63 @@
+"""The alarm hand-off (Merino Ch. 8, (8.1)): a grid alarm is reported where the tracker locates it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.beliefs.alarm_handoff import located_alarms
+from fusion.gaussian import Gaussian
+from fusion.grid_alarms import Alarm
+
+CELL = 5.0
+
+
+def _alarm(north, east) -> Alarm:
+    return Alarm(np.array([north, east]), 4.0 * np.eye(2), 0.93, 2, 0.99)
+
+
+def _track(north, east, std) -> Gaussian:
+    """A 6-state track (position, velocity) at ``(north, east, 0)`` with horizontal standard deviation ``std``."""
+    return Gaussian.from_moments(np.array([north, east, 0.0, 0.0, 0.0, 0.0]),
+                                 np.diag([std**2, std**2, 1.0, 0.01, 0.01, 0.01]))
+
+
+def test_an_alarm_takes_the_position_of_the_most_certain_track_in_its_gate():
+    alarm = _alarm(10.0, 20.0)
+    tracks = [(3, _track(11.0, 20.5, 2.0)),  # in the gate, but a stale duplicate
+              (7, _track(10.4, 19.6, 0.3)),  # in the gate and recently measured
+              (9, _track(60.0, 20.0, 0.1))]  # another fire
+    (where,) = located_alarms([alarm], tracks, CELL)
+    assert where["track"] == 7
+    np.testing.assert_allclose(where["mean"], (10.4, 19.6))
+    np.testing.assert_allclose(where["cov"], 0.09 * np.eye(2))
+    assert where["probability"] == alarm.probability  # the class stays the grid's (Merino (8.1))
+
+
+def test_an_alarm_no_track_reaches_keeps_the_grids_position():
+    alarms = [_alarm(10.0, 20.0), _alarm(-40.0, 0.0), _alarm(80.0, 80.0)]
+    tracks = [(1, _track(10.2, 20.1, 0.4)),  # locates the first
+              (2, _track(-40.5, 0.5, 2.0))]  # the second, though it has grown uncertain
+    located = located_alarms(alarms, tracks, CELL)
+    assert [w["track"] for w in located] == [1, 2, None]
+    np.testing.assert_allclose(located[2]["mean"], (80.0, 80.0))
+    np.testing.assert_allclose(located[2]["cov"], alarms[2].cov)
+
+
+def test_a_track_just_outside_the_gate_does_not_locate_the_alarm():
+    alarm = _alarm(0.0, 0.0)
+    # d^2 = r^2 / (4 + cell^2) = 9 on the gate's edge
+    edge = 3.0 * np.sqrt(4.0 + CELL**2)
+    assert located_alarms([alarm], [(1, _track(0.99 * edge, 0.0, 0.2))], CELL)[0]["track"] == 1
+    assert located_alarms([alarm], [(1, _track(1.01 * edge, 0.0, 0.2))], CELL)[0]["track"] is None
+
+
+
+def test_a_small_fires_track_inside_a_large_neighbours_gate_locates_only_its_own_alarm():
+    """Two fires 18 m apart: the large one's alarm (4.20) is wide enough to hold the small one's track in its
+    gate, but the track is deeper in its own alarm's gate; the large fire, with no track, keeps its grid mean."""
+    large = Alarm(np.array([58.5, -72.3]), np.diag([60.0, 40.0]), 0.95, 21, 0.999)
+    small = _alarm(72.5, -67.5)
+    tracks = [(5, _track(75.0, -64.8, 0.35))]
+    located = located_alarms([large, small], tracks, CELL)
+    assert [w["track"] for w in located] == [None, 5]
+    np.testing.assert_allclose(located[0]["mean"], large.mean)
