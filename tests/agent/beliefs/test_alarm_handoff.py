@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agent.beliefs.alarm_handoff import located_alarms
+from agent.sensors.hot_spots import GATE, gate_distance
 from fusion.gaussian import Gaussian
 from fusion.grid_alarms import Alarm
 
@@ -61,3 +64,23 @@ def test_a_small_fires_track_inside_a_large_neighbours_gate_locates_only_its_own
     located = located_alarms([large, small], tracks, CELL)
     assert [w["track"] for w in located] == [None, 5]
     np.testing.assert_allclose(located[0]["mean"], large.mean)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50), st.floats(0.5, 30.0)), min_size=1, max_size=5),
+       st.lists(st.tuples(st.floats(-60, 60), st.floats(-60, 60), st.floats(0.05, 3.0)), max_size=6))
+def test_every_track_locates_at_most_one_alarm_and_only_one_whose_gate_holds_it(alarm_specs, track_specs):
+    alarms = [Alarm(np.array([n, e]), var * np.eye(2), 0.9, 1, 0.95) for n, e, var in alarm_specs]
+    tracks = [(k, _track(n, e, std)) for k, (n, e, std) in enumerate(track_specs)]
+    located = located_alarms(alarms, tracks, CELL)
+    assert len(located) == len(alarms)
+    used = [w["track"] for w in located if w["track"] is not None]
+    assert len(used) == len(set(used))
+    for alarm, where in zip(alarms, located, strict=True):
+        if where["track"] is None:
+            np.testing.assert_array_equal(where["mean"], alarm.mean)
+            continue
+        position = tracks[where["track"]][1].mean[:2]
+        np.testing.assert_array_equal(where["mean"], position)
+        assert gate_distance(position, alarm, CELL) <= GATE
+        assert all(gate_distance(position, alarm, CELL) <= gate_distance(position, other, CELL) for other in alarms)
