@@ -78,7 +78,7 @@ class GridExchange:
         hot_spots = HotSpots(camera.intrinsics, config.pose_noise.attitude_sigma, self.geometry.cell,
                              terrain) if config.handoff else None
         self.sensor = ThermalSensor(camera, self.geometry.centres_ned(), self.geometry.cell, terrain, hot_spots,
-                                    alarms=lambda: self.alarms)
+                                    alarms=self.current_alarms)
         self.alarms: list[Alarm] = []
         self.located: list[dict] = []  # the alarms where they are reported: agent.beliefs.alarm_handoff
         self._send_timer = Every(config.period)
@@ -132,6 +132,10 @@ class GridExchange:
         known = np.where(p > self.config.alarm_threshold, p, 0.0)
         model = FireSpreadModel(burn=0.0, spread=self.config.plan_spread)
         return np.maximum(p, model.predict(known, np.zeros_like(p), self.config.plan_steps)[0])
+
+    def current_alarms(self) -> list[Alarm]:
+        """The alarms of the last extraction: the gates the hot spots are looked for in."""
+        return self.alarms
 
     def update_alarms(self, t: float) -> list[Alarm]:
         """Every ``alarm_period``, the grid's alarms (4.20); every step, where they are: with ``handoff``, at their
