@@ -36,7 +36,7 @@ from fusion.measurement import los_to_azel
 from perception.camera import Intrinsics
 from perception.detection import ShapeFilter, blobs_from_mask
 from perception.pose import CameraPose
-from perception.projection import pixel_to_ground, pixel_to_ray_world
+from perception.projection import cast_ray, pixel_to_ray_world
 from perception.terrain import FlatTerrain
 
 GATE = 9.0  # Merino (3.64)'s d^2 threshold
@@ -85,11 +85,12 @@ class HotSpots:
             return []
         out = []
         for pixel in inner_blobs(mask):
-            ground = pixel_to_ground(pose, self.intrinsics, self.terrain, np.asarray(pixel, float))
+            ray = pixel_to_ray_world(pose, self.intrinsics, np.asarray(pixel, float))
+            ground = cast_ray(self.terrain, pose.centre, ray)
             if ground is None or not in_gate(ground[:2], alarms, self.cell):
                 self.outside += 1
                 continue
-            azel = los_to_azel(pixel_to_ray_world(pose, self.intrinsics, np.asarray(pixel, float)))
+            azel = los_to_azel(ray)
             cos_el = max(abs(math.cos(azel[1])), MIN_COS_EL)
             R = np.diag([self.angle_var / cos_el**2, self.angle_var])
             out.append(Bearing(t, pose.centre.copy(), azel, R))
