@@ -166,7 +166,7 @@ class Agent:
             self.topology.receive(env.origin, env.payload["reports"], t)
         exchange = self.exchanges.get(env.kind)
         if exchange is not None:
-            edge = self.topology.edge(env.origin, t)
+            edge = self.topology.edge(env.origin, t) if exchange.needs_edge else None
             self.fusions.record(env.origin, t, exchange.receive(env.origin, env.seq, env.stamp, env.payload, edge, t))
 
     def _reject(self, peer: str, reason: str, log_it: bool = True) -> None:

@@ -107,6 +107,10 @@ class BeliefExchange(Protocol):
     its channel filters and its codec."""
 
     kind: str
+    #: Does :meth:`receive` read ``edge``? The agent asks the topology only for exchanges that do: the bridge test
+    #: rebuilds the known graph (O(N^2) for N agents) whenever it changed, and a 40-agent full mesh changes it about
+    #: twice a step — a tenth of a flood agent's step, for an answer flooding and CBBA never read.
+    needs_edge: bool
 
     def sensors(self) -> list[Sensor]:
         """Sensors this belief brings to the agent beyond the ``[sensor]`` section's (e.g. a thermal camera)."""
@@ -132,12 +136,13 @@ class BeliefExchange(Protocol):
         """``message`` did not fit the link budget and was not sent."""
         ...
 
-    def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge | None,
                 t: float) -> list[tuple[str, str | None]]:
         """Decode and fuse a peer's message (``edge``: what the link to ``origin`` is in the known graph,
-        :meth:`agent.net.topology.Topology.edge`); returns ``(method, cause)`` per belief fused, the cause of a
-        fusion that was not exact (:data:`fusion.channel_filter.CAUSES`) or ``None``. Raises
-        :class:`agent.net.wire.DecodeError` on a bad message, and then changes nothing."""
+        :meth:`agent.net.topology.Topology.edge`, or ``None`` when :attr:`needs_edge` is false); returns
+        ``(method, cause)`` per belief fused, the cause of a fusion that was not exact
+        (:data:`fusion.channel_filter.CAUSES`) or ``None``. Raises :class:`agent.net.wire.DecodeError` on a bad
+        message, and then changes nothing."""
         ...
 
     def settle(self, t: float) -> None:

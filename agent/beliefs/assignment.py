@@ -53,6 +53,7 @@ POSITION_TOLERANCE = 0.2  # a task that moved by less than this share of match_r
 
 class AssignmentExchange:
     kind = "tasks"
+    needs_edge = False  # CBBA's consensus rules hold on any graph
 
     def __init__(self, me: str, config: AssignmentConfig, area, base: np.ndarray, views: Views, vehicle,
                  seed: int = 0):
@@ -181,7 +182,7 @@ class AssignmentExchange:
         if "tasks" in message.payload:
             self._sent = None  # not sent: the bids go again next step (a motion alone goes again as itself)
 
-    def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge | None,
                 t: float) -> list[tuple[str, str | None]]:
         """Merge a peer's bids (Table 1), or note where it is when the message is its position alone; the merges
         are counted in :meth:`metrics`, not as fusions. Raises :class:`agent.net.wire.DecodeError` on

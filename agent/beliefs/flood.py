@@ -35,6 +35,8 @@ from fusion.resync import Edge
 class FloodExchange(TrackExchange):
     """Tracks of one agent, built from every agent's detections; see the module docstring."""
 
+    needs_edge = False  # flooded detections are exact on any graph
+
     def __init__(self, *args, incarnation: int = 0, **kwargs):
         super().__init__(*args, **kwargs)
         model = self.tracker.model
@@ -67,7 +69,7 @@ class FloodExchange(TrackExchange):
         """Nothing to undo: what did not fit stays due and goes in a later message."""
 
     # -- receiving --------------------------------------------------------------------------------
-    def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge,
+    def receive(self, origin: str, seq: int, stamp: float, payload: dict, edge: Edge | None,
                 t: float) -> list[tuple[str, str | None]]:
         increments, acks = self._decode(payload)
         self.relay.learn(origin, acks)

@@ -57,6 +57,7 @@ class GridExchange:
     """One agent's fire map: local evidence, exchange with neighbours through channel filters, alarms."""
 
     kind = "grid"
+    needs_edge = True  # channel filters: exact on tree edges, intersection on loops
 
     def __init__(self, me: str, config: GridConfig, area: tuple[float, float, float, float], terrain, seed: int,
                  outbox: Outbox, tracker: Tracker | None = None):

@@ -51,6 +51,7 @@ class ParticleExchange:
     """The candidates of one agent's tracker (``tracker.initiator``), shared and fused with its peers."""
 
     kind = particle_wire.KIND
+    needs_edge = True  # Bayes (Alg. 5.2) on tree edges, LOP (Alg. 5.3) on loops
 
     def __init__(self, config: ParticleInitConfig, tracker, seed: int):
         self.config = config

@@ -69,6 +69,7 @@ class TrackExchange:
     """Tracks of one agent, exchanged with its peers. ``unused`` counts observations it could not use."""
 
     kind = "track"
+    needs_edge = True  # channel filters: exact on tree edges, intersection on loops
 
     def __init__(self, me: str, config: TrackerConfig, step: float, terrain, seed: int, sender: SendScheduler,
                  outbox: Outbox, unused: Counter, topology=None, fusions=None):

@@ -15,13 +15,15 @@ from agent.net import wire
 from agent.net.bus import InMemoryBus
 from agent.net.keys import Keys
 from agent.plugins import Outgoing
+from fusion.resync import Edge
 
 
 class CountExchange:
     kind = "count"
+    needs_edge = False  # a maximum is the same on any graph
 
     def __init__(self):
-        self.steps, self.largest = 0, {}
+        self.steps, self.largest, self.edges = 0, {}, []
 
     def sensors(self):
         return []
@@ -45,6 +47,7 @@ class CountExchange:
         pass
 
     def receive(self, origin, seq, stamp, payload, edge, t):
+        self.edges.append(edge)
         if not isinstance(payload.get("count"), int):
             raise wire.DecodeError("bad_field", "count must be an integer")
         self.largest[origin] = max(payload["count"], self.largest.get(origin, 0))
@@ -87,6 +90,27 @@ def test_a_registered_belief_kind_is_exchanged_and_reported(fleet):
         assert all(n >= 9 for n in metrics["count"]["largest"].values())
         assert metrics["fusions"]["count_max"] >= 18
         assert metrics["bytes_tx_by_kind"]["count"] > 0
+
+
+@pytest.mark.parametrize("needs_edge", [False, True])
+def test_the_topology_is_asked_about_a_link_only_for_a_kind_that_reads_the_answer(fleet, monkeypatch, needs_edge):
+    """The bridge test costs a graph rebuild (O(N^2)) whenever the known graph changed: a kind that fuses the same
+    way on any graph gets ``edge=None`` and costs the topology nothing."""
+    agents, _, _ = fleet
+    monkeypatch.setattr(CountExchange, "needs_edge", needs_edge)
+    asked = []
+    for agent in agents:
+        real = agent.topology.edge
+        monkeypatch.setattr(agent.topology, "edge", lambda peer, t, real=real: asked.append(peer) or real(peer, t))
+    for k in range(5):
+        for agent in agents:
+            agent.step(0.2 * k)
+    edges = [edge for agent in agents for edge in agent.exchanges["count"].edges]
+    assert len(edges) >= 8
+    if needs_edge:
+        assert len(asked) >= len(edges) and all(isinstance(edge, Edge) for edge in edges)
+    else:
+        assert asked == [] and set(edges) == {None}
 
 
 def test_a_malformed_message_of_the_new_kind_is_rejected_by_reason(fleet):

@@ -61,6 +61,7 @@ def test_every_registered_exchange_is_a_belief_exchange():
     assert set(built) == set(EXCHANGES) == {"track", "grid", "tasks", "particles"}
     for kind, exchange in built.items():
         assert exchange.kind == kind
+        assert isinstance(exchange.needs_edge, bool), kind
         assert_implements(exchange, plugins.BeliefExchange)
         for sensor in exchange.sensors():
             assert_implements(sensor, plugins.Sensor)
