@@ -4,8 +4,9 @@ To add a benchmark, write a module in this package that defines
 
 * ``run(quick: bool = False, repeats: int | None = None) -> dict`` — a JSON-serialisable result with at
   least ``"benchmark"`` (its name), ``"rows"`` (one dict per measurement) and ``"goals"``; ``quick``
-  must finish in well under a minute, ``repeats`` (a hidden CLI flag) overrides the number of timed
-  repeats so that tests can make it quicker still (:class:`mesh_sim.bench.common.Settings` does this);
+  must finish in well under a minute, ``repeats`` (``--repeats N``) overrides the number of timed
+  repeats — fewer, so that tests can make it quicker still (:class:`mesh_sim.bench.common.Settings` does this),
+  or more, where one run says little (``bench scale`` pools its runs per team size);
 * ``report(result: dict, console=None) -> None`` — print the tables for a result,
 
 and add a :class:`Benchmark` entry to :data:`BENCHMARKS`. Modules are imported only when their
