@@ -62,12 +62,6 @@ class FireCamera:
         """The evidence of a segmented frame on the cells (Merino (4.9)-(4.15), (4.31))."""
         return camera_cell_evidence(mask, cells_ned, cell, pose, self.intrinsics, self.model, self.noise)
 
-    def evidence(self, state, fires: list[Fire], decoys: list[tuple[float, float, float]], cells_ned: np.ndarray,
-                 cell: float, terrain=None) -> CellEvidence:
-        """Cell evidence of the frame seen from vehicle ``state`` (:meth:`look`, then :meth:`cell_evidence`)."""
-        mask, pose = self.look(state, fires, decoys, terrain)
-        return self.cell_evidence(mask, pose, cells_ned, cell)
-
     def _reported_pose(self, state) -> CameraPose:
         """The pose the telemetry reports: the truth plus the noise the likelihood model accounts for."""
         n = self.noise

@@ -54,7 +54,6 @@ def test_a_track_just_outside_the_gate_does_not_locate_the_alarm():
     assert located_alarms([alarm], [(1, _track(1.01 * edge, 0.0, 0.2))], CELL)[0]["track"] is None
 
 
-
 def test_a_small_fires_track_inside_a_large_neighbours_gate_locates_only_its_own_alarm():
     """Two fires 18 m apart: the large one's alarm (4.20) is wide enough to hold the small one's track in its
     gate, but the track is deeper in its own alarm's gate; the large fire, with no track, keeps its grid mean."""

@@ -29,7 +29,8 @@ def _frames(config: GridConfig, count: int, ignite_at: int, seed: int):
         fires = [Fire(OLD_FIRE, 5.0, 800.0)] + ([Fire(NEW_FIRE, 5.0, 800.0)] if k >= ignite_at else [])
         north, east = rng.uniform(-10.0, 10.0, 2)
         state = types.SimpleNamespace(position=np.array([north, east, -60.0]), roll=0.0, pitch=0.0, yaw=0.0)
-        yield camera.evidence(state, fires, [], geometry.centres_ned(), geometry.cell)
+        mask, pose = camera.look(state, fires, [])
+        yield camera.cell_evidence(mask, pose, geometry.centres_ned(), geometry.cell)
 
 
 def _fire_config() -> GridConfig:
