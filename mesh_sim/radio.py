@@ -11,7 +11,7 @@ section, all keys optional::
     range = 250.0              # metres; required by "disk" (no fixed edges, only range), optional otherwise
     preset = "wifi"            # ideal (default) | wifi | cellular | lossy  (agent.net.link_plan.PRESETS)
     loss = 0.01                # netem-named overrides of the preset: loss (0..1), delay_ms, jitter_ms,
-    delay_ms = 5.0             #   rate (bytes/s, 0 = unlimited), burst (bytes)
+    delay_ms = 5.0             #   rate (bytes/s, 0 = unlimited), burst (bytes), queue (bytes; 0 = police)
     [radio.gilbert_elliott]    # netem "loss gemodel p r 1-h 1-k"; replaces the Bernoulli loss
     p = 0.05                   #   (giving loss as well is an error)
     r = 0.25

@@ -15,7 +15,7 @@ the sequence of messages that reach it (it is evaluated at the message stamps, i
 from __future__ import annotations
 
 import hashlib
-from collections import Counter, OrderedDict
+from collections import Counter, OrderedDict, deque
 from dataclasses import dataclass
 from statistics import NormalDist
 
@@ -133,15 +133,56 @@ class TokenBucket:
         self.tokens = self.burst
         self.last: float | None = None
 
-    def admit(self, size: float, t: float) -> bool:
+    def _refill(self, t: float) -> None:
+        """Tokens earned up to ``t``: ``min(burst, tokens + rate · (t − last))``; an earlier ``t`` earns nothing."""
         if self.last is not None and t > self.last:
             self.tokens = min(self.burst, self.tokens + self.rate * (t - self.last))
         if self.last is None or t > self.last:
             self.last = t
+
+    def admit(self, size: float, t: float) -> bool:
+        self._refill(t)
         if size <= self.tokens:
             self.tokens -= size
             return True
         return False
+
+
+class Shaper(TokenBucket):
+    """A token bucket with a first-in first-out queue of ``queue`` bytes: Linux ``tc-tbf(8)``'s ``rate``,
+    ``burst`` and ``limit``, and netem's ``rate``, which queue where :class:`TokenBucket` polices.
+
+    ``depart(size, t)`` is the time the message arriving at ``t`` leaves the bucket, or None when it is dropped.
+    A message leaves at once when nothing waits and ``size`` tokens are there (then it is exactly
+    :meth:`TokenBucket.admit`). Otherwise it waits behind the messages already waiting, if their bytes plus
+    ``size`` fit the queue (tbf's byte FIFO counts every packet not yet sent), and leaves when the bucket
+    has earned its tokens: with ``s = max(t, d_prev)``, the departure of the message ahead,
+    ``d = s + max(0, size − tokens(s)) / rate`` and the bucket is left empty at ``d``. A message that does not
+    fit the queue is dropped; so with ``queue`` 0 a shaper is the policer :class:`TokenBucket`. Departures are
+    non-decreasing, so a link keeps its order; the long-run throughput is still ``rate``.
+    """
+
+    def __init__(self, rate: float, burst: float, queue: float = 0.0):
+        super().__init__(rate, burst)
+        self.queue = check_number("queue", queue, lo=0.0)
+        self._waiting: deque[tuple[float, float]] = deque()  # (departure, bytes) of the messages not yet sent
+        self._waiting_bytes = 0.0
+
+    def depart(self, size: float, t: float) -> float | None:
+        while self._waiting and self._waiting[0][0] <= t:
+            self._waiting_bytes -= self._waiting.popleft()[1]
+        if not self._waiting and self.admit(size, t):
+            return t
+        if size > self.burst or self._waiting_bytes + size > self.queue:
+            return None
+        start = max(t, self.last)
+        self._refill(start)
+        departure = start + max(0.0, size - self.tokens) / self.rate
+        self.tokens = max(0.0, self.tokens - size)
+        self.last = departure
+        self._waiting.append((departure, size))
+        self._waiting_bytes += size
+        return departure
 
 
 
@@ -165,9 +206,10 @@ class LinkEmulator:
 
     Checks in order: ``down`` (no link src → me at the stamp, or either node lost), ``range`` (both
     positions known and farther apart than the plan's range), ``loss`` (Bernoulli or Gilbert–Elliott,
-    deterministic in (seed, src, me, seq)), ``rate`` (the src → me token bucket at the stamp; only
-    messages that got this far use tokens, as in netem where lost packets never reach the rate stage).
-    Otherwise the message is delivered at stamp + delay + jitter (seconds).
+    deterministic in (seed, src, me, seq)), ``rate`` (the src → me :class:`Shaper` at the stamp: a policer
+    without a ``queue``; only messages that got this far use tokens, as in netem where lost packets never
+    reach the rate stage). Otherwise the message is delivered at its departure from the bucket (the stamp,
+    unless it queued) + delay + jitter (seconds).
     """
 
     def __init__(self, me: str, plan: LinkPlan | dict):
@@ -178,7 +220,7 @@ class LinkEmulator:
         self.drops: Counter = Counter()  # (src, cause) -> messages
         self.delivered: Counter = Counter()  # src -> messages
         self.bytes_delivered: Counter = Counter()  # src -> bytes
-        self._buckets: dict[str, TokenBucket] = {}
+        self._buckets: dict[str, Shaper] = {}
         self._chains: dict[str, GilbertElliottChain] = {}
         self._loss_draws: dict[str, _Draws] = {}
         self._jitter_draws: dict[str, _Draws] = {}
@@ -232,12 +274,14 @@ class LinkEmulator:
         params = self.plan.params(src, self.me)
         if self._lost(src, int(seq), params):
             return self._drop(src, "loss")
+        sent = stamp
         if params.rate is not None:
             bucket = self._buckets.get(src)
             if bucket is None:
-                bucket = self._buckets[src] = TokenBucket(params.rate, params.bucket_depth)
-            if not bucket.admit(size, stamp):
+                bucket = self._buckets[src] = Shaper(params.rate, params.bucket_depth, params.queue)
+            sent = bucket.depart(size, stamp)
+            if sent is None:
                 return self._drop(src, "rate")
         self.delivered[src] += 1
         self.bytes_delivered[src] += size
-        return Verdict(stamp + self._delay(src, int(seq), params), None)
+        return Verdict(sent + self._delay(src, int(seq), params), None)

@@ -21,6 +21,11 @@ Parameters are named after ``tc netem`` so a scenario can be replayed on a real 
     *polices* (drops what exceeds the bucket) and the send side is expected to keep under
     :meth:`LinkPlan.sender_budget`; in the long run both pass ``rate`` bytes/s. ``burst`` has no netem
     equivalent and is left out of :func:`netem_command`.
+``queue``
+    Bytes a rate-limited link holds while they wait for tokens (default 0: the bucket polices). Above 0 the
+    link is a shaper, Linux ``tc-tbf(8)``'s ``limit`` (:class:`agent.net.link_emulator.Shaper`): what does not
+    find tokens waits in order, what does not fit the queue is dropped. Left out of :func:`netem_command`
+    (netem's ``limit`` counts packets).
 ``ge``
     Gilbert–Elliott loss (:class:`GilbertElliott`), netem's ``loss gemodel p r 1-h 1-k``. As in netem a
     link has one loss model: ``ge`` and a non-zero ``loss`` are exclusive.
@@ -107,7 +112,7 @@ class LinkParams:
     """One directed link's impairments, named like ``tc netem`` (units in the module docstring).
 
     ``rate`` 0 is stored as None (unlimited). ``burst`` None means the default depth
-    (:attr:`bucket_depth`); a burst given with an unlimited rate is ignored. A message larger than the
+    (:attr:`bucket_depth`); a burst or queue given with an unlimited rate is ignored. A message larger than the
     bucket depth can never pass a rate-limited link.
     """
 
@@ -116,6 +121,7 @@ class LinkParams:
     jitter_ms: float = 0.0
     rate: float | None = None
     burst: float | None = None
+    queue: float = 0.0
     ge: GilbertElliott | None = None
 
     def __post_init__(self):
@@ -131,6 +137,7 @@ class LinkParams:
             if burst < MIN_BURST:
                 raise ValueError(f"burst: must be >= {MIN_BURST} bytes (one MTU), got {burst:g}")
             set_(self, "burst", burst)
+        set_(self, "queue", check_number("queue", self.queue, lo=0.0))
         if self.ge is not None and not isinstance(self.ge, GilbertElliott):
             raise ValueError(f"ge: must be a GilbertElliott or None, got {type(self.ge).__name__}")
         if self.ge is not None and self.loss > 0:
@@ -168,6 +175,7 @@ class LinkParams:
             "jitter_ms": self.jitter_ms,
             "rate": self.rate,
             "burst": self.burst,
+            "queue": self.queue,
             "ge": None if self.ge is None else self.ge.to_dict(),
         }
 

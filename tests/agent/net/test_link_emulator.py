@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from agent.net.link_emulator import GilbertElliottChain, LinkEmulator, TokenBucket, Verdict, uniform
+from agent.net.link_emulator import GilbertElliottChain, LinkEmulator, Shaper, TokenBucket, Verdict, uniform
 from agent.net.link_plan import GilbertElliott, LinkPlan
 
 AGENTS = ["uav0", "uav1", "uav2", "uav3"]
@@ -186,6 +186,93 @@ def test_emulator_rate_drops_and_counters():
     assert em.drops[("uav1", "rate")] == 5
     assert em.admit("uav2", 0, 1000, 0.0).delivered  # each link has its own bucket
 
+
+
+# ---- shaper (a token bucket with a queue: tc-tbf) ------------------------------------------------------
+
+
+def tbf_by_time_steps(rate, burst, queue, arrivals, dt=1e-4):
+    """An independent tbf: time advances in steps of ``dt``; each step the bucket earns ``rate · dt`` (up to
+    ``burst``), arrivals of the step join the FIFO if it has room (else are dropped), and the head leaves while the
+    bucket holds its size. Returns each message's departure (None when dropped), within ``dt``."""
+    tokens, fifo, out = burst, [], [None] * len(arrivals)
+    order = sorted(range(len(arrivals)), key=lambda i: arrivals[i][1])
+    step, k, end = 0, 0, max(t for _, t in arrivals) + 2 * (queue + burst) / rate + 1.0
+    while step * dt <= end:
+        now = step * dt
+        while k < len(order) and arrivals[order[k]][1] <= now:
+            i = order[k]
+            size = arrivals[i][0]
+            if not fifo and size <= tokens:
+                tokens -= size
+                out[i] = now
+            elif sum(arrivals[j][0] for j in fifo) + size <= queue and size <= burst:
+                fifo.append(i)
+            k += 1
+        while fifo and arrivals[fifo[0]][0] <= tokens:
+            tokens -= arrivals[fifo[0]][0]
+            out[fifo.pop(0)] = now
+        tokens = min(burst, tokens + rate * dt)
+        step += 1
+    return out
+
+
+def test_shaper_departures_match_a_time_stepped_tbf():
+    rng = np.random.default_rng(5)
+    rate, burst, queue = 2000.0, 3000.0, 1600.0
+    t = np.round(np.cumsum(rng.exponential(0.25, size=60)), 4)  # ~1.4x the rate offered, on the oracle's grid
+    sizes = rng.integers(100, 900, size=len(t))
+    arrivals = list(zip(sizes.tolist(), t.tolist(), strict=True))
+    shaper = Shaper(rate, burst, queue)
+    got = [shaper.depart(size, at) for size, at in arrivals]
+    want = tbf_by_time_steps(rate, burst, queue, arrivals)
+    assert [g is None for g in got] == [w is None for w in want]
+    assert 3 <= sum(g is None for g in got) and sum(g is not None and g > at for g, (_, at) in zip(got, arrivals,
+                                                                                                    strict=True)) >= 5
+    assert max(abs(g - w) for g, w in zip(got, want, strict=True) if g is not None) < 2e-4
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 2500), st.floats(0.0, 0.5)), min_size=1, max_size=40))
+def test_shaper_without_queue_is_the_policer(messages):
+    """Bad input for a shaper with no queue: any message that finds too few tokens must be dropped, never held."""
+    shaper, bucket, t = Shaper(1000.0, 2000.0, 0.0), TokenBucket(1000.0, 2000.0), 0.0
+    for size, gap in messages:
+        t += gap
+        assert (shaper.depart(size, t) == t) is bucket.admit(size, t)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 1500), st.floats(0.0, 0.3)), min_size=1, max_size=60))
+def test_shaper_keeps_order_its_queue_and_the_envelope(messages):
+    rate, burst, queue = 1000.0, 2000.0, 1600.0
+    shaper, t, sent = Shaper(rate, burst, queue), 0.0, []
+    for size, gap in messages:
+        t += gap
+        waiting = sum(s for s, d in sent if d > t)
+        d = shaper.depart(size, t)
+        if d is None:
+            assert waiting + size > queue or (size > burst)
+            continue
+        assert d >= t and (not sent or d >= sent[-1][1])  # in order, never before it arrived
+        assert d - t <= (waiting + size) / rate + 1e-9  # waits at most for the bytes ahead of it and its own
+        if d > t:
+            assert waiting + size <= queue
+        sent.append((size, d))
+    # the bytes leaving over any window [d_j, d_i] stay within burst + rate · (d_i - d_j)
+    for j in range(len(sent)):
+        for i in range(j, len(sent)):
+            assert sum(s for s, _ in sent[j:i + 1]) <= burst + rate * (sent[i][1] - sent[j][1]) + 1e-6
+
+
+def test_emulator_queue_delays_then_drops():
+    """A 1,000-byte message finding the 5,000-byte bucket empty waits 0.1 s at 10 kB/s; the queue holds two."""
+    em = LinkEmulator("uav0", plan({"rate": 10_000, "burst": 5_000, "queue": 2_000, "delay_ms": 2.0}))
+    verdicts = [em.admit("uav1", s, 1000, 0.0) for s in range(8)]
+    assert [v.cause for v in verdicts] == [None] * 7 + ["rate"]
+    assert [v.deliver_at for v in verdicts[:7]] == pytest.approx([0.002] * 5 + [0.102, 0.202])
+    assert em.admit("uav1", 8, 1000, 0.15).deliver_at == pytest.approx(0.302)  # behind the one still waiting
+    assert em.drops[("uav1", "rate")] == 1
 
 
 def test_sender_budget_is_tightest_outgoing_rate():

@@ -84,6 +84,8 @@ def test_netem_commands():
         ({"rate": -5}, "rate"),
         ({"rate": math.inf}, "rate"),
         ({"rate": 1e5, "burst": 100}, "burst"),
+        ({"rate": 1e5, "queue": -1}, "queue"),
+        ({"rate": 1e5, "queue": math.nan}, "queue"),
         ({"ge": {"p": 1.2, "r": 0.1}}, "ge.p"),
         ({"ge": {"p": 0.1, "r": -0.1}}, "ge.r"),
         ({"ge": {"p": 0.1}}, "missing"),
