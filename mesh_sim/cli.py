@@ -96,7 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--quick", action="store_true", help="fewer, shorter repeats: seconds instead of minutes")
     bench.add_argument("--json", metavar="PATH", type=Path, help="also write the result as JSON to PATH")
     bench.add_argument("--repeats", type=_positive_int, metavar="N",
-                       help="timed repeats per figure (scale: runs per team size, pooled; default: the mode's)")
+                       help="timed repeats per figure (scale: runs per team size, pooled; testbed: seeds of the "
+                            "shaper and per-link rows, pooled; default: the mode's)")
     bench.add_argument("--sizes", type=_sizes, metavar="N,N,...",
                        help="scale: the team sizes to run, e.g. 8,16,32,40,48 (default: each sensor's own)")
     bench.add_argument("--sensor", choices=sorted(SENSORS), help="scale: measure this sensor only (default: each)")
