@@ -72,8 +72,8 @@ PAIRED_SEEDS = 3  # seeds 1..this of the radio shaper and tbf per link, pooled (
 def run(quick: bool = False, repeats: int | None = None, *, agents: int | None = None, duration: float | None = None,
         runs_dir: str | os.PathLike | None = None) -> dict:
     """Run the benchmark (``repeats``: the seeds, 1 to ``repeats``, of the radio shaper and tbf per link rows,
-    pooled; default :data:`PAIRED_SEEDS`); ``agents`` and ``duration`` override the mode's. Run folders go to a temporary folder removed afterwards, or
-    under ``runs_dir`` (kept)."""
+    pooled; default :data:`PAIRED_SEEDS`); ``agents`` and ``duration`` override the mode's. Run folders go to a
+    temporary folder removed afterwards, or under ``runs_dir`` (kept)."""
     from mesh_sim import netns
 
     if (why := netns.unavailable()) is not None:
@@ -275,6 +275,7 @@ def report(result: dict, console=None) -> None:
     if paired:
         common.print_table(
             console, "Fleet RMSE [m] per seed: the rows above give the mean", ["seed", *(r["run"] for r in paired)],
-            [(str(seed), *(fmt(r["rmse_by_seed"][i], ".2f") for r in paired)) for i, seed in enumerate(paired[0]["seeds"])])
+            [(str(seed), *(fmt(r["rmse_by_seed"][i], ".2f") for r in paired))
+             for i, seed in enumerate(paired[0]["seeds"])])
     common.print_table(console, "Goals (issue 17)", ["goal", "met"],
                        [(name, common.verdict(ok)) for name, ok in result["goals"].items()])
