@@ -124,7 +124,8 @@ def main(argv=None) -> int:
         keys = Keys(args.fleet)
         config = load_config(args.connect, args.zenoh_config)
         camera = _open_camera(args.camera) if args.camera is not None else None
-        transport = ZenohTransport(args.id, keys, config, keys.agent_subscriptions())  # SessionError: no router
+        subscribe = keys.agent_subscriptions(scenario.senders_to(args.id))
+        transport = ZenohTransport(args.id, keys, config, subscribe)  # SessionError: no router
     except (OSError, ValueError) as err:
         return usage_error(f"agent {args.id}", err)
     duration = args.duration if args.duration is not None else scenario.duration

@@ -96,6 +96,11 @@ class AgentScenario:
             raise ValueError(f"agent id {agent_id!r} is not a member of the fleet ({', '.join(sorted(self.fleet))})")
         return self.fleet
 
+    def senders_to(self, agent_id: str) -> tuple[str, ...] | None:
+        """The peers whose beliefs can reach ``agent_id`` over the emulated radio, or None for every peer
+        (:meth:`agent.net.link_plan.LinkPlan.senders_to`; ideal links: every peer)."""
+        return None if self.radio_plan is None else self.radio_plan.senders_to(agent_id)
+
     def start_position(self, index: int) -> np.ndarray:
         """Agents start spread along the southern edge of the area, at flight altitude."""
         (n0, _), (e0, e1) = self.area.north, self.area.east

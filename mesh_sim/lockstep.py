@@ -42,8 +42,8 @@ def run_lockstep(scenario: Scenario, run_dir: Path, rerun: str = "off", cameras:
         raise ValueError(f"--camera names no agent of this run: {sorted(unknown)}")
     sources = {name: VideoSource(source) for name, source in cameras.items()}  # ValueError if one cannot open
     agents = [
-        Agent(f"uav{i}", i, sc, bus.endpoint(f"uav{i}", keys.agent_subscriptions()), keys, seed=sc.seed * 1000 + i,
-              camera=sources.get(f"uav{i}"), lockstep=True)
+        Agent(f"uav{i}", i, sc, bus.endpoint(f"uav{i}", keys.agent_subscriptions(sc.senders_to(f"uav{i}"))), keys,
+              seed=sc.seed * 1000 + i, camera=sources.get(f"uav{i}"), lockstep=True)
         for i in range(sc.agents)
     ]
     world = World(scenario, bus.endpoint("world", World.subscriptions(keys)), keys)

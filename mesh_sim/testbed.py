@@ -187,14 +187,17 @@ class TestbedLauncher(Launcher):
         return epoch
 
 
-def bytes_check(agent: dict, sent: dict[str, int], peers: int, observer: bool, link: str = "tcp") -> dict:
+def bytes_check(agent: dict, sent: dict[str, int], peers: int, observer: bool, link: str = "tcp",
+                listeners: int | None = None) -> dict:
     """What host ``uavK`` sent on its veth during the run (``sent``: the counters' growth from simulation time 0
     to the end) against what its agent says it sent, made comparable.
 
     A router forwards a message once to each remote router with a subscriber for it (over ``link``): a belief crosses
-    the veth once per other UAV host (``peers``) and once more for the ground's observer when it runs; a topology
-    report once per other UAV host; telemetry and simulation data (the world subscribes) once. So the fair
-    expectation is ``E = beliefs × (peers + observer) + topology × peers + telemetry + simulation`` (the agent's
+    the veth once per UAV host whose agent subscribes to this one's beliefs (``listeners``, default ``peers``: every
+    other UAV host, unless the emulated radio is sparse, :meth:`agent.config.AgentScenario.senders_to`) and once
+    more for the ground's observer when it runs; a topology report once per other UAV host (``peers``); telemetry
+    and simulation data (the world subscribes) once. So the fair expectation is
+    ``E = beliefs × (listeners + observer) + topology × peers + telemetry + simulation`` (the agent's
     own counts: ``bytes_tx_by_kind``, ``sim_bytes_tx_by_kind``), and ``ratio = kernel tx ÷ E``: above 1 by the
     framing (Ethernet 14 + IP 20 + TCP 32 or UDP 8 bytes per frame, Zenoh's batch and message headers), TCP's
     acknowledgements of what the host receives, and Zenoh's own traffic (keep-alives, declarations,
@@ -205,13 +208,22 @@ def bytes_check(agent: dict, sent: dict[str, int], peers: int, observer: bool, l
     telemetry, topology = by_kind.get("telemetry", 0), by_kind.get("topology", 0)
     beliefs = sum(by_kind.values()) - telemetry - topology
     simulation = sum(agent.get("sim_bytes_tx_by_kind", {}).values())
-    expected = beliefs * (peers + observer) + topology * peers + telemetry + simulation
+    listeners = peers if listeners is None else listeners
+    expected = beliefs * (listeners + observer) + topology * peers + telemetry + simulation
     payload = sent["tx_bytes"] - FRAME_HEADERS[link] * sent["tx_packets"]
     return {"agent_bytes_tx": int(sum(by_kind.values())), "agent_sim_bytes_tx": int(simulation), "peers": peers,
+            "listeners": listeners,
             "unfanned_tx": int(telemetry + simulation),  # what only the ground's router receives
             "observer": observer, "expected_tx": int(expected), "kernel_tx": sent["tx_bytes"],
             "kernel_tx_packets": sent["tx_packets"], "ratio": sent["tx_bytes"] / expected if expected else None,
             "payload_ratio": payload / expected if expected else None}
+
+
+def _listeners(scenario, name: str, names) -> int:
+    """How many other UAV hosts' agents subscribe to ``name``'s beliefs
+    (:meth:`agent.config.AgentScenario.senders_to`)."""
+    return sum(1 for other in names if other != name
+               and ((senders := scenario.senders_to(other)) is None or name in senders))
 
 
 def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rate: float | None = None,
@@ -266,7 +278,8 @@ def run_testbed(scenario, run_dir: Path, link_down: list[LinkDown] = (), tbf_rat
         "tbf_per_link": tbf_per_link,
         "router_link": router_link,
         "link_events": bed.events.done if bed.events is not None else [],
-        "bytes": {name: bytes_check(agents[name], sent[name], len(names) - 1, bed.rerun != "off", router_link)
+        "bytes": {name: bytes_check(agents[name], sent[name], len(names) - 1, bed.rerun != "off", router_link,
+                                    _listeners(scenario.agent, name, names))
                   for name in names if "bytes_tx_by_kind" in agents.get(name, {})},
     })
     return outcome

@@ -36,10 +36,16 @@ class Keys:
     def topology(self, agent: str) -> str:
         return f"{self.root}/topology/{agent}"
 
-    def agent_subscriptions(self) -> list[str]:
+    def agent_subscriptions(self, senders: tuple[str, ...] | None = None) -> list[str]:
         """What an agent listens to: its peers' beliefs and topology reports, and the world's truth (simulation
-        only) — not their telemetry, which is for the ground station."""
-        return [f"{self.root}/belief/**", self.topology("*"), self.sim("truth")]
+        only) — not their telemetry, which is for the ground station. ``senders``: the only peers whose beliefs
+        can reach it (a sparse emulated radio, :meth:`agent.net.link_plan.LinkPlan.senders_to`; the others'
+        would be dropped as ``down`` after decoding), or None for every peer's."""
+        if senders is None:
+            beliefs = [f"{self.root}/belief/**"]
+        else:
+            beliefs = [self.belief("*", peer) for peer in senders]
+        return [*beliefs, self.topology("*"), self.sim("truth")]
 
     def sim(self, name: str) -> str:
         return f"{self.root}/sim/{name}"

@@ -357,6 +357,17 @@ class LinkPlan:
             return False
         return (src, dst) not in ph.cut
 
+    def senders_to(self, me: str) -> tuple[str, ...] | None:
+        """The agents whose messages can ever reach ``me`` — a link to ``me`` in some phase, not cut in all of them —
+        or None when every agent can (a phase with every pair connected, or a ``range``: who is in range is known
+        only at run time). What an agent need not even receive (:meth:`agent.net.keys.Keys.agent_subscriptions`)."""
+        if me not in self.agents:
+            raise ValueError(f"agent {me!r} is not in the link plan {list(self.agents)}")
+        if self.range is not None or any(ph.edges is None for ph in self._phases):
+            return None
+        return tuple(src for src in self.agents if src != me and any(
+            frozenset((src, me)) in ph.edges and (src, me) not in ph.cut for ph in self._phases))
+
     def edges_at(self, t: float) -> set[frozenset]:
         """Undirected edges usable at ``t`` in at least one direction (lost nodes have none)."""
         ph = self._phase(t)

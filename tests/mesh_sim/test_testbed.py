@@ -94,6 +94,16 @@ def test_bytes_check_counts_each_message_once_per_remote_router_subscribed():
     assert over_udp["payload_ratio"] == pytest.approx((5000 - 420) / 4000)  # 42 bytes of headers: UDP's 8, not 32
     assert testbed.bytes_check(agent, {"tx_bytes": 5000, "tx_packets": 10}, peers=3, observer=True)[
         "expected_tx"] == 1000 * 4 + 200 * 3 + 300 + 100
+    # a sparse radio: only the one neighbour's router subscribes to the beliefs; topology still goes to all three
+    assert testbed.bytes_check(agent, {"tx_bytes": 5000, "tx_packets": 10}, peers=3, observer=False, listeners=1)[
+        "expected_tx"] == 1000 * 1 + 200 * 3 + 300 + 100
+
+
+def test_listeners_are_the_hosts_whose_agents_can_hear_one():
+    line = load("partition").agent
+    names = [f"uav{i}" for i in range(4)]
+    assert [testbed._listeners(line, name, names) for name in names] == [1, 2, 2, 1]
+    assert testbed._listeners(load("default", agents=4).agent, "uav0", names) == 3
 
 
 def _ours(tag: str) -> str:

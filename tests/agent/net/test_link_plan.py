@@ -42,6 +42,24 @@ def test_plan_is_plain_json_data():
 # ---- presets and netem commands ---------------------------------------------------------------------
 
 
+def test_senders_to_is_who_can_ever_reach_an_agent():
+    line = [["uav0", "uav1"], ["uav1", "uav2"], ["uav2", "uav3"]]
+    names = ["uav0", "uav1", "uav2", "uav3"]
+    plan = LinkPlan.from_dict({"agents": names, "seed": 1, "phases": [{"t": 0.0, "edges": line}]})
+    assert plan.senders_to("uav0") == ("uav1",) and plan.senders_to("uav2") == ("uav1", "uav3")
+    # a later phase's link counts; a link cut one way in every phase does not, that way
+    plan = LinkPlan.from_dict({"agents": names, "seed": 1, "phases": [
+        {"t": 0.0, "edges": line, "cut": [["uav1", "uav0"]]},
+        {"t": 10.0, "edges": [*line, ["uav0", "uav3"]], "cut": [["uav1", "uav0"]]}]})
+    assert plan.senders_to("uav0") == ("uav3",) and plan.senders_to("uav1") == ("uav0", "uav2")
+    # every pair connected in some phase, or a range known only at run time: everyone may be heard
+    assert LinkPlan.from_dict({"agents": names, "seed": 1}).senders_to("uav0") is None
+    assert LinkPlan.from_dict({"agents": names, "seed": 1, "range": 100.0,
+                               "phases": [{"t": 0.0, "edges": line}]}).senders_to("uav0") is None
+    with pytest.raises(ValueError, match="'uav9' is not in the link plan"):  # bad input: a name outside the team
+        plan.senders_to("uav9")
+
+
 def test_presets_parse_and_match_the_anchors():
     assert set(PRESETS) == {"ideal", "wifi", "cellular", "lossy"}
     for params in PRESETS.values():
