@@ -161,6 +161,8 @@ class LinkEvents(threading.Thread):
 class TestbedLauncher(Launcher):
     """:class:`Launcher` with each child in its host's namespace, a client of its host's router."""
 
+    fork_agents = False  # each agent is started in its own host's namespace, not forked from one process
+
     def __init__(self, net: netns.Network, *args, link_down: list[LinkDown] = (), router_link: str = "tcp",
                  **kwargs):
         super().__init__(*args, **kwargs)

@@ -183,17 +183,18 @@ def test_sigterm_stops_the_run_and_keeps_its_results(tmp_path):
 
 @pytest.mark.slow
 def test_children_exit_when_the_launcher_is_killed(tmp_path):
-    """Bad event: the launcher itself is SIGKILLed. Its children must not become orphans."""
+    """Bad event: the launcher itself is SIGKILLed. Its children must not become orphans: the world, and the agents
+    with the fork server that forked them (the launcher's grandchildren)."""
     cmd = [sys.executable, "-m", "mesh_sim.cli", "run", "--agents", "3", "--duration", "60", "--rerun", "off",
            "--out", str(tmp_path)]
     launcher = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.time() + 30
         children = []
-        while time.time() < deadline and len(children) < 4:
-            children = psutil.Process(launcher.pid).children()
+        while time.time() < deadline and len(children) < 5:
+            children = psutil.Process(launcher.pid).children(recursive=True)
             time.sleep(0.2)
-        assert len(children) >= 4, "the launcher did not start its children"
+        assert len(children) >= 5, "the launcher did not start its children"
         time.sleep(3.0)
         launcher.kill()
         launcher.wait()
