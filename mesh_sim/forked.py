@@ -74,8 +74,12 @@ class ForkServer:
         self._replies: queue.Queue = queue.Queue()
         self._reader = threading.Thread(target=self._read, name="forkserver-reader", daemon=True)
         self._reader.start()
-        if "ready" not in self._reply("start"):
-            raise ForkServerError(f"the agents' fork server did not start: {self._why()}")
+        try:
+            if "ready" not in self._reply("start"):
+                raise ForkServerError(f"the agents' fork server did not start: {self._why()}")
+        except ForkServerError:
+            self.close(0.0)  # nothing of it is left running
+            raise
 
     def _read(self) -> None:
         for line in self.process.stdout:
