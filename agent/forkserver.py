@@ -70,11 +70,6 @@ def with_parent(argv: list[str], parent: int) -> list[str]:
     return out
 
 
-def exit_code(status: int) -> int:
-    """A wait status as ``subprocess`` reports it: the exit code, or minus the signal that killed the process."""
-    return -os.WTERMSIG(status) if os.WIFSIGNALED(status) else os.WEXITSTATUS(status)
-
-
 def _child(argv: list[str], log: str) -> None:
     """In the forked child: its output to ``log``, no input, default signal handling, then the agent. Never
     returns."""
@@ -139,7 +134,7 @@ class Server:
             if pid == 0:
                 return
             self.children.discard(pid)
-            self.say({"exit": pid, "code": exit_code(status)})
+            self.say({"exit": pid, "code": os.waitstatus_to_exitcode(status)})  # subprocess's convention
 
     def serve(self, fd: int) -> None:
         """Requests from file descriptor ``fd`` until it ends, then the children's ends."""
@@ -160,18 +155,19 @@ class Server:
     def stop(self) -> None:
         """SIGTERM the children still running (by PID), SIGKILL them after :data:`GRACE_S`, and reap them all."""
         self.reap()
-        deadline, sig = time.monotonic() + GRACE_S, signal.SIGTERM
+        self._signal(signal.SIGTERM)
+        deadline = time.monotonic() + GRACE_S
         while self.children:
-            for pid in self.children:
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, sig)
-            sig = 0  # only once; 0 checks that it exists
             if time.monotonic() > deadline:
-                for pid in self.children:
-                    with contextlib.suppress(ProcessLookupError):
-                        os.kill(pid, signal.SIGKILL)
+                self._signal(signal.SIGKILL)
+                deadline = float("inf")
             time.sleep(POLL_S)
             self.reap()
+
+    def _signal(self, sig: int) -> None:
+        for pid in self.children:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, sig)
 
 
 def main(argv=None) -> int:

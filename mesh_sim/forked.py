@@ -133,7 +133,8 @@ class ForkServer:
         return None
 
     def close(self, grace: float) -> None:
-        """End the server's input: it exits once its children have (stop them first); killed after ``grace``."""
+        """End the server's input: it stops the children still running, reaps them and exits; killed after
+        ``grace``."""
         if self.process.stdin and not self.process.stdin.closed:
             try:
                 self.process.stdin.close()

@@ -350,9 +350,9 @@ class Launcher:
     def _spawn(self, name: str, role: str, args: list[str], incarnation: int = 0) -> None:
         log_path = self.run_dir / "logs" / (f"{name}.log" if incarnation == 0 else f"{name}.{incarnation}.log")
         started = time.time()
-        if role == "agent" and self.forkserver is not None and args[:2] == ["-m", "agent"]:
-            log_path.touch()
-            proc = self.forkserver.spawn(args[2:], log_path)
+        if role == "agent" and self.forkserver is not None:
+            log_path.touch()  # there from the spawn on, as a spawned child's is
+            proc = self.forkserver.spawn(args[2:], log_path)  # args: "-m", "agent", then the agent's own
         else:
             with open(log_path, "wb") as log:
                 proc = subprocess.Popen(self._command(name, role, args), stdout=log, stderr=subprocess.STDOUT,
