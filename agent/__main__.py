@@ -54,6 +54,7 @@ from agent.runtime import (
     write_json,
 )
 from agent.vehicles.base import VehicleError
+from agent.warmup import one_thread_for_opencv, warm_up
 
 log = logging.getLogger("skymesh.agent")
 
@@ -135,6 +136,8 @@ def main(argv=None) -> int:
     except (VehicleError, ValueError) as err:  # a vehicle that cannot fly: nothing has run yet
         transport.close()
         return usage_error(f"agent {args.id}", err)
+    warm_up(scenario)  # before reporting ready: the first steps then cost what the next ones do
+    one_thread_for_opencv()
     stop = threading.Event()
     install_stop_handlers(stop)
     epoch = args.epoch if args.epoch is not None else time.time()

@@ -3,13 +3,13 @@
 An agent process spends most of its private memory on the modules it imports (numpy, SciPy's linear algebra and
 optimisation, Zenoh, OpenCV with a camera: about 45 MB of 70) and a second or more of CPU importing them; with
 N processes each pays both. This server imports them once — it builds a throwaway :class:`agent.agent.Agent` of
-the scenario over an in-memory bus, so that exactly the modules an agent of *this* scenario imports are loaded
-(OpenCV only with a camera, never matplotlib or Rerun: issue 12's lean processes) — freezes the garbage
-collector's view of them (``gc.freeze``: a collection then never writes to those pages) and forks one child per
-agent. A child shares the server's pages until it writes to them (copy-on-write), so what it imported costs it
-nothing until used. Measured (16 camera agents of ``default``, each stepping 60 times over its own bus): proportional
-set size 70.4 MB per spawned process against 27.7 MB per forked one (plus 44 MB for the server, shared by all);
-16 ready in 3 s instead of 14.
+the scenario over an in-memory bus and steps it, so that exactly the modules an agent of *this* scenario imports
+are loaded (OpenCV only with a camera, never matplotlib or Rerun: issue 12's lean processes) and its one-time work
+is done (:mod:`agent.warmup`) — freezes the garbage collector's view of them (``gc.freeze``: a collection then
+never writes to those pages) and forks one child per agent. A child shares the server's pages until it writes to
+them (copy-on-write), so what it imported costs it nothing until used. Measured (16 camera agents of ``default``,
+each stepping 60 times over its own bus): proportional set size 70.4 MB per spawned process against 27.7 MB per
+forked one (plus 44 MB for the server, shared by all); 16 ready in 3 s instead of 14.
 
 Each child is then exactly ``python -m agent ARGS`` (:func:`agent.__main__.main`), with its output in its own
 log. The server opens no Zenoh session and starts no thread before it forks (a fork copies only the calling
@@ -45,20 +45,15 @@ GRACE_S = 10.0  # seconds between SIGTERM and SIGKILL for the children left at t
 
 
 def preload(scenario_file: str) -> None:
-    """Import what an agent of this scenario imports: the agent's entry point, and one agent built and dropped
-    (its sensor, planner and beliefs import their modules as they are built). A MAVLink vehicle is not built (it
-    would connect to an autopilot): its agents import the rest themselves."""
+    """Import what an agent of this scenario imports, and do its one-time work: the agent's entry point, and a
+    throwaway agent stepped and dropped (:func:`agent.warmup.warm_up`: its sensor, planner and beliefs import their
+    modules as they are built, and its first steps fill the per-process caches). A MAVLink vehicle is not built
+    (it would connect to an autopilot): its agents import the rest themselves."""
     import agent.__main__  # noqa: F401  (the entry point and its imports: the agent, Zenoh, the runtime)
-    from agent.agent import Agent
     from agent.config import AgentScenario, read_scenario_file
-    from agent.net.bus import InMemoryBus
-    from agent.net.keys import Keys
+    from agent.warmup import warm_up
 
-    scenario = AgentScenario.from_dict(read_scenario_file(scenario_file))
-    if scenario.vehicle.get("kind") == "mavlink":
-        return
-    keys = Keys("preload")
-    Agent("uav0", 0, scenario, InMemoryBus().endpoint("uav0", keys.agent_subscriptions()), keys, seed=0).close()
+    warm_up(AgentScenario.from_dict(read_scenario_file(scenario_file)))
 
 
 def with_parent(argv: list[str], parent: int) -> list[str]:
