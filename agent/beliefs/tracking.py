@@ -53,6 +53,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from agent.beliefs.particle_init import ParticleInitiator
+from agent.beliefs.track_candidates import Candidate, Candidates, position_spread
 from agent.beliefs.tracking_config import TrackerConfig
 from agent.sensors.bearing import Bearing
 from fusion import lapack
@@ -116,6 +117,8 @@ class Tracker:
                       if config.motion == "damped" else ConstantVelocity(3, config.q, config.vertical_q))
             self.model = TrajectoryModel(motion, step, config.window)
         self.epoch = 0
+        self.candidates = self._candidates(config)
+        self._scan = 0  # numbers the scans of _apply_scan: a candidate's partner comes from another scan
         self.tracks: dict[int, Track] = {}
         self.labels: dict[tuple[str, int], int] = {}  # (peer, remote track id) -> local track id
         self._next_id = 0
@@ -139,6 +142,20 @@ class Tracker:
                 self._delete(track.id)
         if new_epoch:
             self._predicted = {tid: track.belief for tid, track in self.tracks.items()}
+        if self.candidates is not None:
+            self.candidates.expire(self.epoch, self.epoch - self.model.window + 1)
+
+    def _candidates(self, config: TrackerConfig) -> Candidates | None:
+        """Two-detection start-up (``start_hits = 2``) on the ray's ground point, for a trajectory belief (not the
+        IMM's, nor the particle initiator's own candidates): :mod:`agent.beliefs.track_candidates`."""
+        if config.start_hits == 1 or config.motion == "imm" or self.initiator is not None:
+            return None
+        stationary = self.model.stationary[3:, 3:]
+        velocity_cov = (np.linalg.inv(stationary) if stationary.any() else  # damped: the stationary velocity
+                        np.diag([config.speed_std**2, config.speed_std**2, config.vertical_speed_std**2]))
+        spread = position_spread(self.model.F, self.model.motion.noise(self.model.step), velocity_cov,
+                                 config.confirm_within + config.window)
+        return Candidates(spread, config.confirm_within, config.max_position_std)
 
     def _timed_out(self, track: Track) -> bool:
         """Tentative for longer than ``confirm_within`` steps, or measured by nobody for ``stale_after`` seconds."""
@@ -173,7 +190,9 @@ class Tracker:
         Merino (3.64)), then initiation from the detections outside every gate. Gating uses the epoch's
         predictions (:meth:`_prediction`), so the distances of every scan against the tracks that exist at
         the start are computed together, in one vectorised call. Returns counts of what happened."""
-        counts = {"updated": 0, "initiated": 0, "unused": 0} | ({} if self.initiator is None else {"candidate": 0})
+        counts = {"updated": 0, "initiated": 0, "unused": 0}
+        if self.initiator is not None or self.candidates is not None:
+            counts["candidate"] = 0
         self._gated, self._priors = {}, {}
         self._pending = [b for scan in scans for b in scan]  # a track started mid-update is gated against all at once
         if not by_label:
@@ -201,23 +220,12 @@ class Tracker:
         return [len(scan) - len(kept) for scan, kept in zip(scans, usable, strict=True)]
 
     def _apply_scan(self, bearings: list[Bearing], by_label: bool, counts: dict[str, int]) -> None:
+        self._scan += 1
         pairs = self._pairs_by_label(bearings) if by_label else self._pairs_by_distance(bearings)
         used = set()
         for b_index, track_id in pairs:
             used.add(b_index)
-            track = self.tracks.get(track_id)  # None: deleted as lost by a duplicate confirmed before it
-            bearing = bearings[b_index]
-            if track is None or not self._measure(track, bearing):
-                counts["unused"] += 1
-                continue
-            track.hits += 1
-            track.last_measured = max(track.last_measured, bearing.t)
-            if not track.confirmed and track.hits >= self.config.confirm_hits:
-                track.confirmed = True
-                self._add_held()  # the duplicate test compares the tracks' estimates
-                if not by_label and self._duplicate(track):
-                    self._delete(track.id)
-            counts["updated"] += 1
+            self._use(self.tracks.get(track_id), bearings[b_index], by_label, counts)
         for b_index, bearing in enumerate(bearings):
             if b_index in used:
                 continue
@@ -226,10 +234,46 @@ class Tracker:
             elif self.initiator is not None and not by_label:
                 self.initiator.offer(bearing)
                 counts["candidate"] += 1
+            elif self.candidates is not None and not by_label:
+                self._start_or_hold(bearing, counts)
             elif self._initiate(bearing) is not None:
                 counts["initiated"] += 1
             else:
                 counts["unused"] += 1
+
+    def _use(self, track: Track | None, bearing: Bearing, by_label: bool, counts: dict[str, int]) -> None:
+        """Apply an associated detection to its track (None: deleted as lost by a duplicate confirmed before it)
+        and confirm the track at ``confirm_hits``."""
+        if track is None or not self._measure(track, bearing):
+            counts["unused"] += 1
+            return
+        track.hits += 1
+        track.last_measured = max(track.last_measured, bearing.t)
+        if not track.confirmed and track.hits >= self.config.confirm_hits:
+            track.confirmed = True
+            self._add_held()  # the duplicate test compares the tracks' estimates
+            if not by_label and self._duplicate(track):
+                self._delete(track.id)
+        counts["updated"] += 1
+
+    def _start_or_hold(self, bearing: Bearing, counts: dict[str, int]) -> None:
+        """A detection outside every gate: the partner of a held candidate — the tentative track starts from the
+        candidate, as it would have at the candidate's detection, and takes this one — or a candidate itself."""
+        candidate = self.candidates.take(bearing, self.model.epoch_of(bearing.t), self._scan, self.config.gate)
+        if candidate is not None:
+            track = self._start_track(candidate.position, candidate.cov, self._offset(candidate.bearing),
+                                      candidate.bearing.truth_id, candidate.bearing.t)
+            track.created_epoch = candidate.created
+            counts["initiated"] += 1
+            self._use(track, bearing, False, counts)
+            return
+        located = self._geolocate(bearing)
+        if located is None:
+            counts["unused"] += 1
+            return
+        self.candidates.hold(Candidate(bearing, located[0], located[1], self.model.epoch_of(bearing.t), self.epoch,
+                                       self._scan))
+        counts["candidate"] += 1
 
     def _hand_over(self, handover) -> None:
         """A converged particle candidate becomes a track: its Gaussian is the first position measurement."""

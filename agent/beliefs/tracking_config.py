@@ -71,6 +71,9 @@ class TrackerConfig:
     sensor_sigma: float = 0.5  # camera position error [m] (GPS); chosen here
     policy: str = "hybrid"  # naive, exact, ci, hybrid (channel filters: agent.beliefs.tracks) or flood
     intersection: str = "ci"  # where the common information is unknown: "ci", "fast_ci" or "ici" (intersect_on_newest)
+    #: detections a track needs to exist: 1 starts a tentative track at the first one outside every gate; 2 holds
+    #: that one as a candidate until a detection of another scan falls in its gate (agent.beliefs.track_candidates)
+    start_hits: int = 2
     initiation: str = "ray"  # "ray" (the ray's ground point) or "particles" (agent.beliefs.particle_init, Merino §5.3)
     particle_init: ParticleInitConfig = field(default_factory=ParticleInitConfig)  # [tracking.particle_init]
     imm: ImmConfig = field(default_factory=ImmConfig)  # [tracking.imm]: the modes of motion = "imm"
@@ -83,6 +86,9 @@ class TrackerConfig:
                 if unknown:
                     raise ValueError(f"unknown tracking.{name} settings: {sorted(unknown)}")
                 object.__setattr__(self, name, kind(**value))
+        if self.start_hits not in (1, 2) or self.start_hits > self.confirm_hits:
+            raise ValueError(f"tracking.start_hits must be 1 or 2 and at most confirm_hits ({self.confirm_hits}), "
+                             f"got {self.start_hits!r}")
         if self.initiation not in ("ray", "particles"):
             raise ValueError(f"tracking.initiation must be ray or particles, got {self.initiation!r}")
         positive = ("gate", "track_gate", "max_position_std", "tau", "q", "vertical_q", "stale_after", "speed_std",
