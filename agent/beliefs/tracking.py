@@ -23,8 +23,11 @@ decentralized fusion equals the centralized filter exactly.
   Confirmed tracks have the first claim on the detections inside their gates.
 * **Initiation**: a detection outside every gate starts a *tentative* track at the ground point of
   its ray (``perception.geolocation``), with an unscented-transform covariance and a broad velocity
-  prior. With ``initiation = "particles"`` it starts a particle candidate along the ray instead, which
-  becomes a track once it has converged to one compact cloud (:mod:`agent.beliefs.particle_init`, Merino §5.3).
+  prior — with ``start_hits = 2`` (the default) only once a detection of another scan falls in its gate;
+  until then it is held as a candidate, a ground point with no trajectory (:mod:`agent.beliefs.track_candidates`),
+  and the track then starts from it as it would have at its detection. With ``initiation = "particles"`` it
+  starts a particle candidate along the ray instead, which becomes a track once it has converged to one compact
+  cloud (:mod:`agent.beliefs.particle_init`, Merino §5.3).
   A track is confirmed after ``confirm_hits`` updates and is only then shared; one that is
   confirmed inside the track-to-track gate of another confirmed track is a duplicate and is dropped.
 * **Track-to-track** (Merino (3.65)): a peer's track is matched to the local track minimising
