@@ -115,7 +115,8 @@ def _ours(tag: str) -> str:
 def test_three_hosts_run_the_default_scenario_with_a_link_down_and_leave_nothing(tmp_path, monkeypatch):
     """Three namespaces, bearing sensor, 15 s, uav1's link down from 4 s to 8 s: the run completes with finite
     metrics, the link went down and up at those simulation times, every other host's veth carried the run's traffic
-    (the payload at least what the agents sent), nothing left uav1's veth while it was down (its kernel counters
+    (the payload at least what the agents sent to hosts they could reach: one listener fewer while uav1 was down;
+    0.94 of all they sent was once measured under CI), nothing left uav1's veth while it was down (its kernel counters
     at the two link events are equal; an older comparison of uav1's payload ratio with the others' was at the
     mercy of the machine's load) and it sent again once up, and no namespace nor process is left. How much more
     than the agents' bytes the kernel carries is Zenoh's overhead,
@@ -140,7 +141,10 @@ def test_three_hosts_run_the_default_scenario_with_a_link_down_and_leave_nothing
     assert [e["at_sim_s"] for e in report["link_events"]] == [pytest.approx(4.0, abs=0.5), pytest.approx(8.0, abs=0.5)]
     assert set(report["bytes"]) == {"uav0", "uav1", "uav2"}
     connected = {name: check["payload_ratio"] for name, check in report["bytes"].items() if name != "uav1"}
-    assert all(r >= 1.0 for r in connected.values()), (connected, report["bytes"])
+    # what a host sent uav1 while its link was down was not carried: one of its listeners, for that share of the run
+    outage = report["link_events"][1]["at_sim_s"] - report["link_events"][0]["at_sim_s"]
+    floors = {name: 1.0 - outage / scenario.agent.duration / report["bytes"][name]["listeners"] for name in connected}
+    assert all(connected[name] >= floors[name] for name in connected), (connected, floors, report["bytes"])
     down, up = (e["counters"] for e in report["link_events"])
     assert up["tx_packets"] == down["tx_packets"] and up["tx_bytes"] == down["tx_bytes"], (down, up)
     at_end = report["hosts"]["uav1"]["at_end"]
