@@ -54,7 +54,7 @@ from agent.runtime import (
     write_json,
 )
 from agent.vehicles.base import VehicleError
-from agent.warmup import one_thread_for_opencv, warm_up
+from agent.warmup import warm_up
 
 log = logging.getLogger("skymesh.agent")
 
@@ -137,7 +137,6 @@ def main(argv=None) -> int:
         transport.close()
         return usage_error(f"agent {args.id}", err)
     warm_up(scenario)  # before reporting ready: the first steps then cost what the next ones do
-    one_thread_for_opencv()
     stop = threading.Event()
     install_stop_handlers(stop)
     epoch = args.epoch if args.epoch is not None else time.time()

@@ -120,6 +120,9 @@ class Tracker:
                       if config.motion == "damped" else ConstantVelocity(3, config.q, config.vertical_q))
             self.model = TrajectoryModel(motion, step, config.window)
         self.epoch = 0
+        #: a new track's velocity prior: the stationary velocity of ``damped`` and the pseudo-prior of
+        #: ``constant_velocity`` alike
+        self.speed_cov = np.diag([config.speed_std**2, config.speed_std**2, config.vertical_speed_std**2])
         self.candidates = self._candidates(config)
         self._scan = 0  # numbers the scans of _apply_scan: a candidate's partner comes from another scan
         self.tracks: dict[int, Track] = {}
@@ -153,10 +156,7 @@ class Tracker:
         IMM's, nor the particle initiator's own candidates): :mod:`agent.beliefs.track_candidates`."""
         if config.start_hits == 1 or config.motion == "imm" or self.initiator is not None:
             return None
-        stationary = self.model.stationary[3:, 3:]
-        velocity_cov = (np.linalg.inv(stationary) if stationary.any() else  # damped: the stationary velocity
-                        np.diag([config.speed_std**2, config.speed_std**2, config.vertical_speed_std**2]))
-        spread = position_spread(self.model.F, self.model.motion.noise(self.model.step), velocity_cov,
+        spread = position_spread(self.model.F, self.model.motion.noise(self.model.step), self.speed_cov,
                                  config.confirm_within + config.window)
         return Candidates(spread, config.confirm_within, config.max_position_std)
 
@@ -469,10 +469,9 @@ class Tracker:
     def _start_track(self, position, cov, offset: int, truth_id, last_measured: float) -> Track:
         """A tentative track whose first information is a position measurement ``N(position, cov)``."""
         c = self.config
-        speed_cov = np.diag([c.speed_std**2, c.speed_std**2, c.vertical_speed_std**2])
         if c.motion == "imm":  # the position and a velocity prior, in every mode
             start = np.zeros((STATE_DIM, STATE_DIM))
-            start[:3, :3], start[3:, 3:] = cov, speed_cov
+            start[:3, :3], start[3:, 3:] = cov, self.speed_cov
             belief = ImmWindow.start(self.model, self.epoch - offset, np.concatenate([position, np.zeros(3)]), start,
                                      c.imm.start_probs()).advanced_to(self.epoch)
         else:
@@ -481,7 +480,7 @@ class Tracker:
             belief = belief.update(where.H, where.R_inv, position, offset)
         if c.motion == "constant_velocity":  # no stationary velocity in the prior: add a local pseudo-prior
             H_v = np.hstack([np.zeros((3, 3)), np.eye(3)])
-            belief = belief.update(H_v, np.linalg.inv(speed_cov), np.zeros(3), offset)
+            belief = belief.update(H_v, np.linalg.inv(self.speed_cov), np.zeros(3), offset)
         track = self._new_track(belief)
         track.truth_id = truth_id
         track.last_measured = last_measured

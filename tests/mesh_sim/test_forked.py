@@ -34,9 +34,10 @@ def test_forked_agents_answer_as_popen_does(tmp_path):
         failed = server.spawn(["--id", "uav0", "--index", "0", *common], tmp_path / "uav0.log")
         assert failed.wait(timeout=30) == 2 and failed.poll() == 2
         assert "the Zenoh router could not be reached" in (tmp_path / "uav0.log").read_text()
-        # bad input: an index outside the team; killed by a signal: subprocess's negative code
+        # bad input: an index outside the team
         assert server.spawn(["--id", "uav1", "--index", "9", *common], tmp_path / "uav1.log").wait(timeout=30) == 2
         # over a real router, waiting for an epoch that never comes: killed by PID, it reports -SIGKILL
+        # (subprocess's negative code for a signal)
         router, endpoint = open_router()
         try:
             waiting = server.spawn(["--id", "uav1", "--index", "1", "--epoch-file", str(tmp_path / "never"),
