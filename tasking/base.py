@@ -40,11 +40,14 @@ class TrackView:
 @dataclass(frozen=True)
 class MapView:
     """The agent's certainty grid as a planner sees it: the per-cell probability to plan on (rows, cols),
-    the cells' (north, east) centres (rows, cols, 2) and, for a Beta grid, its ``(alpha, beta)`` counts."""
+    the cells' (north, east) centres (rows, cols, 2) and, for a Beta grid, its ``(alpha, beta)`` counts; the
+    alarms' (north, east) positions as the agent reports them, and its peers' last heard (north, east) positions."""
 
     probability: np.ndarray
     centres: np.ndarray
     beta: tuple[np.ndarray, np.ndarray] | None = None
+    alarms: Sequence[np.ndarray] = ()
+    peers: Mapping[str, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

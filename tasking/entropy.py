@@ -47,6 +47,7 @@ import numpy as np
 from scipy.special import digamma, entr, gammaln
 
 from fusion.grid import beta_entropy as grid_beta_entropy
+from tasking.alarm_watch import watched_alarm
 from tasking.base import VehicleStateLike
 from tasking.orbit import Goal, goto_goal
 from tasking.search import check_area
@@ -171,6 +172,12 @@ def beta_expected_entropy_reduction(alpha, beta, looks: int = 1) -> np.ndarray:
     return np.maximum(information, 0.0)
 
 
+def explored_share(probability) -> float:
+    """The share of cells whose entropy (4.21) is below half of a cell's most, ``ln 2 / 2`` (p outside about
+    [0.11, 0.89]): how much of the area the map has settled."""
+    return float(np.mean(bernoulli_entropy(probability) < 0.5 * math.log(2.0)))
+
+
 def move_cost(move, previous, step: float, turn_cost: float) -> float:
     """costMove of (4.24), form chosen here: ``|move| / step + turn_cost (1 - cos θ)``, θ the angle
     between ``move`` and ``previous`` ((north, east) metres); no turn term when either is zero."""
@@ -197,6 +204,9 @@ class EntropyPlannerConfig:
     cost_weight: float = 0.1  # β of (4.24)
     turn_cost: float = 1.0  # weight of the direction change in costMove
     horizon: int = 1  # look-ahead moves (1: the thesis's greedy rule)
+    watch: bool = False  # hover over an alarm this agent won (tasking.alarm_watch); the others explore
+    explorers: int = 1  # with watch: agents that never watch, so the area keeps being explored
+    watch_from: float = 0.0  # with watch: the explored share of the area (cells of entropy < ln 2 / 2) to start at
 
     def __post_init__(self):
         for name in ("step", "footprint", "pd", "pf", "gain_weight", "cost_weight", "turn_cost"):
@@ -215,6 +225,13 @@ class EntropyPlannerConfig:
         if isinstance(h, bool) or not isinstance(h, Integral) or not 1 <= h <= MAX_HORIZON:
             raise ValueError(f"horizon must be an integer in [1, {MAX_HORIZON}], got {h!r}")
         object.__setattr__(self, "horizon", int(h))
+        if not isinstance(self.watch, bool):
+            raise ValueError(f"entropy planner watch must be true or false, got {self.watch!r}")
+        e = self.explorers
+        if isinstance(e, bool) or not isinstance(e, Integral) or e < 0:
+            raise ValueError(f"entropy planner explorers must be an integer >= 0, got {e!r}")
+        if not 0.0 <= self.watch_from <= 1.0:
+            raise ValueError(f"entropy planner watch_from must be a share in [0, 1], got {self.watch_from!r}")
 
 
 class EntropyPlanner:
@@ -232,6 +249,7 @@ class EntropyPlanner:
         self.altitude = float(altitude)
         self.last_move = np.zeros(2)
         self.last_gain = 0.0
+        self.watching = False  # the watch has begun (config.watch, once the area was explored enough)
         self._sequences = np.array(list(itertools.product(range(len(MOVES)), repeat=config.horizon)), int)
         moves = np.array(MOVES, float) * config.step
         self._offsets = np.cumsum(moves[self._sequences], axis=1)  # (S, H, 2) positions relative to the start
@@ -252,8 +270,16 @@ class EntropyPlanner:
         return np.stack([beta_expected_entropy_reduction(a, b, n) for n in range(c.horizon + 1)])
 
     def plan(self, state: VehicleStateLike, views: Mapping[str, object]) -> Goal:
-        """The planner seam (:class:`tasking.base.Planner`): explore the ``"grid"`` view."""
+        """The planner seam (:class:`tasking.base.Planner`): explore the ``"grid"`` view; with ``watch``, first
+        hover over the alarm this agent won (:func:`tasking.alarm_watch.watched_alarm`), if any."""
         grid = views["grid"]
+        if self.config.watch and not self.watching:
+            self.watching = explored_share(grid.probability) >= self.config.watch_from
+        if self.watching:
+            k = watched_alarm(state.position, grid.peers, grid.alarms, self.config.explorers)
+            if k is not None:
+                self.last_move, self.last_gain = np.zeros(2), 0.0
+                return goto_goal(grid.alarms[k], self.altitude)
         return self.goal_for(state.position, grid.probability, grid.centres, grid.beta)
 
     def goal_for(self, position, probability, centres, beta: tuple[np.ndarray, np.ndarray] | None = None) -> Goal:

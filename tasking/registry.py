@@ -85,9 +85,9 @@ PLANNERS: dict[str, PlannerEntry] = {
         f.name: (int if f.name in ("capacity", "orbit_slots") else str if f.name in WORDS else _NUMBER)
         for f in fields(AssignmentConfig)},
         AssignmentConfig.from_options),
-    "entropy": PlannerEntry(_entropy, "grid", {
-        f.name: (int if f.name == "horizon" else _NUMBER) for f in fields(EntropyPlannerConfig)
-        if f.name not in ("pd", "pf")}),  # P_D and P_F are the grid sensor's ([grid] pd, pf)
+    "entropy": PlannerEntry(_entropy, "grid", {  # P_D and P_F are the grid sensor's ([grid] pd, pf)
+        f.name: {"horizon": int, "explorers": int, "watch": bool}.get(f.name, _NUMBER)
+        for f in fields(EntropyPlannerConfig) if f.name not in ("pd", "pf")}),
     "feature": PlannerEntry(_feature, "track", {
         f.name: {"path": list, "look_at": str}.get(f.name, _NUMBER) for f in fields(FeaturePlannerConfig)},
         FeaturePlannerConfig.from_options),
@@ -108,7 +108,7 @@ def check_tasking(section: dict, views: frozenset[str] | None = None) -> tuple[s
     if unknown:
         raise ValueError(f"unknown tasking settings for planner {name!r}: {unknown}; known: {sorted(entry.options)}")
     for key, value in options.items():
-        if isinstance(value, bool) or not isinstance(value, entry.options[key]):
+        if (isinstance(value, bool) and entry.options[key] is not bool) or not isinstance(value, entry.options[key]):
             raise ValueError(f"tasking.{key} has the wrong type: {value!r}")
     if entry.check is not None:
         entry.check(options)

@@ -62,7 +62,7 @@ def _grid(ctx: ExchangeContext) -> BeliefExchange | None:
     from agent.beliefs.grids import GridExchange  # the thermal camera's image code, only for a [grid]
 
     return GridExchange(ctx.me, sc.grid, sc.area.as_tuple(), ctx.terrain, ctx.seed + 7919, ctx.outbox,
-                        tracker=ctx.shared.get("tracker"))
+                        tracker=ctx.shared.get("tracker"), vehicle=ctx.vehicle)
 
 
 def _tasks(ctx: ExchangeContext) -> BeliefExchange | None:

@@ -27,7 +27,9 @@ weighted log-odds at the Chernoff point, or Merino's max rules (4.5)/(4.39).
 
 from __future__ import annotations
 
+import math
 from collections import Counter
+from numbers import Real
 
 import numpy as np
 
@@ -50,6 +52,7 @@ from fusion.grid_intersect import chernoff_intersect, half_intersect, max_inters
 from fusion.resync import Edge
 from tasking.base import MapView
 
+PEER_FRESH = 5  # grid periods: a peer not heard for longer is not counted on to watch an alarm (chosen here)
 INTERSECT_RULES = {"chernoff": chernoff_intersect, "max": max_intersect, "half": half_intersect}
 
 
@@ -60,8 +63,11 @@ class GridExchange:
     needs_edge = True  # channel filters: exact on tree edges, intersection on loops
 
     def __init__(self, me: str, config: GridConfig, area: tuple[float, float, float, float], terrain, seed: int,
-                 outbox: Outbox, tracker: Tracker | None = None):
+                 outbox: Outbox, tracker: Tracker | None = None, vehicle=None):
         self.me = me
+        self.vehicle = vehicle  # where the map's author is: sent with every grid message (None: not sent)
+        self.peers: dict[str, tuple[float, np.ndarray]] = {}  # peer -> (time heard, its (north, east) then)
+        self.now = 0.0  # s: the last frame's time
         self.config = config
         self.outbox = outbox
         self.geometry = config.geometry(area, terrain)
@@ -101,6 +107,7 @@ class GridExchange:
     def absorb(self, t: float, observations: Observations) -> None:
         """One frame's cell evidence updates the local grid (first advanced to the tick of ``t``: forgetting,
         :mod:`fusion.grid_forgetting`) and goes to the simulator's centralized map."""
+        self.now = t
         self._advance(t)
         ev = observations["fire_evidence"]
         if self.config.belief == "logodds":
@@ -155,8 +162,11 @@ class GridExchange:
         if not self._send_timer.due(t):
             return None
         codec, quantized = self.sender.encode(self.beliefs.to_layers(self.grid), neighbours)
-        return Outgoing({"geometry": self.geometry.to_dict(), "belief": self.config.belief, "grid": codec,
-                         "acks": self.receiver.acks()}, context=quantized)  # the layers receivers rebuild
+        payload = {"geometry": self.geometry.to_dict(), "belief": self.config.belief, "grid": codec,
+                   "acks": self.receiver.acks()}
+        if self.vehicle is not None:
+            payload["position"] = [float(v) for v in self.vehicle.state().position[:2]]
+        return Outgoing(payload, context=quantized)  # the layers receivers rebuild
 
     def sent(self, seq: int, message: Outgoing) -> None:
         """Message ``seq`` left: the channel filters now assume neighbours that acknowledge it hold it."""
@@ -186,6 +196,7 @@ class GridExchange:
         acks = payload.get("acks", {})
         if not isinstance(acks, dict) or not all(isinstance(v, int) and v >= 0 for v in acks.values()):
             raise wire.DecodeError("bad_field", "grid acks must map peers to sequence numbers")
+        position = _sender_position(payload.get("position"))
         layers = self.receiver.decode(origin, seq, payload.get("grid"))
         try:
             received = self.beliefs.from_layers(layers, self.beliefs.epoch_of(stamp))  # the tick it was sent at
@@ -194,6 +205,8 @@ class GridExchange:
         ours = acks.get(self.me)
         if ours is not None:
             self.sender.acknowledge(origin, ours)
+        if position is not None:
+            self.peers[origin] = (t, position)
         out = self.channels.on_receive(origin, self.grid, received, ours, seq, edge)
         self.grid = out.fused
         self._advance(t)  # a peer's clock ahead of ours moved the grid on: what we send is read at its tick
@@ -210,8 +223,13 @@ class GridExchange:
 
     # -- views and results ------------------------------------------------------------------------
     def view(self) -> MapView:
+        """The map to plan on, the alarms where they are reported, and the peers heard within the last
+        ``PEER_FRESH`` grid periods (a peer gone silent is left out of the watch assignment,
+        :mod:`tasking.alarm_watch`)."""
         beta = self.grid.shape_parameters() if self.config.belief == "beta" else None
-        return MapView(self.planning_probability(), self.geometry.centres(), beta)
+        alarms = tuple(np.asarray(a["mean"], float) for a in self.located)
+        fresh = {p: ne for p, (heard, ne) in self.peers.items() if self.now - heard <= PEER_FRESH * self.config.period}
+        return MapView(self.planning_probability(), self.geometry.centres(), beta, alarms, fresh)
 
     def telemetry(self) -> dict:
         return {"alarms": self.located}
@@ -237,3 +255,14 @@ class GridExchange:
                                for a in self.located],
             "thinned": self.grids_thinned,
         }}
+
+
+def _sender_position(value) -> np.ndarray | None:
+    """A grid message's ``position``: absent (``None``), or the sender's (north, east) as two finite numbers;
+    anything else is a :class:`agent.net.wire.DecodeError` (``bad_field``)."""
+    if value is None:
+        return None
+    if (isinstance(value, list | tuple) and len(value) == 2
+            and all(isinstance(v, Real) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+        return np.array(value, float)
+    raise wire.DecodeError("bad_field", f"a grid's sender position must be two finite numbers, got {value!r}")

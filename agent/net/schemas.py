@@ -156,6 +156,7 @@ class GridPayload(TypedDict, total=False):
     belief: GridName
     grid: GridCodecPayload
     acks: Annotated[dict[PeerName, Seq], msgspec.Meta(max_length=MAX_PEERS)]
+    position: Pair  # the sender's (north, east) [m] when it sent (tasking.alarm_watch)
 
 
 @dataclass(frozen=True)

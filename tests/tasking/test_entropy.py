@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from hypothesis import strategies as st
 from scipy import integrate, stats
 from scipy.special import digamma
 
+from tasking.base import MapView
 from tasking.entropy import (
     MOVES,
     EntropyPlanner,
@@ -21,6 +23,7 @@ from tasking.entropy import (
     beta_entropy,
     beta_expected_entropy_reduction,
     expected_entropy_reduction,
+    explored_share,
     move_cost,
 )
 
@@ -332,6 +335,12 @@ def test_shared_map_gives_implicit_coordination(shared):
         {"horizon": 4},  # beyond MAX_HORIZON
         {"horizon": 1.5},  # non-integer horizon
         {"cost_weight": True},  # a bool, not a number
+        {"watch": 1},  # a number, not true or false
+        {"explorers": -1},  # fewer than no explorers
+        {"explorers": 1.5},  # half an explorer
+        {"explorers": True},  # a bool, not a count
+        {"watch_from": 1.2},  # a share above 1
+        {"watch_from": math.nan},  # NaN share
     ],
 )
 def test_bad_config_raises(kwargs):
@@ -386,3 +395,36 @@ def test_bad_gain_inputs_raise():
         beta_expected_entropy_reduction(-1.0, 1.0)  # negative Beta count
     with pytest.raises(ValueError, match="non-finite"):
         beta_entropy(np.inf, 1.0)  # infinite Beta count
+
+
+# ------------------------------------------------------------------------------------------- watch
+
+
+def _watch_view(probability, alarms, peers):
+    return {"grid": MapView(probability, centres(), None, tuple(np.asarray(a, float) for a in alarms), peers)}
+
+
+def test_a_watcher_hovers_over_the_alarm_it_won_and_an_explorer_explores():
+    """Two agents, one alarm at (200, 200): the nearer hovers over it at its altitude; the other, with the same
+    map, makes the explorer's move (one step, as without the watch)."""
+    p = np.full((30, 30), 0.5)
+    state = SimpleNamespace(position=np.array([190.0, 190.0, -30.0]), velocity=np.zeros(3))
+    near = planner(watch=True).plan(state, _watch_view(p, [(200.0, 200.0)], {"far": np.array([20.0, 20.0])}))
+    np.testing.assert_allclose(near.position, [200.0, 200.0, -30.0])
+    far_state = SimpleNamespace(position=np.array([20.0, 20.0, -30.0]), velocity=np.zeros(3))
+    far = planner(watch=True).plan(far_state, _watch_view(p, [(200.0, 200.0)], {"near": np.array([190.0, 190.0])}))
+    explore = planner().goal_for(far_state.position, p, centres())
+    np.testing.assert_allclose(far.position, explore.position)
+
+
+def test_the_watch_waits_until_the_area_is_explored_and_then_holds():
+    """watch_from = 0.5, a lone agent: on an unexplored map (p = 0.5 everywhere) the agent explores past the
+    alarm; once half the cells are settled it watches, and it keeps watching when the map's entropy rises again."""
+    unexplored, half = np.full((30, 30), 0.5), np.full((30, 30), 0.5)
+    half[:15] = 0.01
+    state = SimpleNamespace(position=np.array([100.0, 100.0, -30.0]), velocity=np.zeros(3))
+    pl = planner(watch=True, watch_from=0.5, explorers=0)  # a lone agent
+    assert not np.allclose(pl.plan(state, _watch_view(unexplored, [(250.0, 250.0)], {})).position[:2], 250.0)
+    np.testing.assert_allclose(pl.plan(state, _watch_view(half, [(250.0, 250.0)], {})).position[:2], 250.0)
+    np.testing.assert_allclose(pl.plan(state, _watch_view(unexplored, [(250.0, 250.0)], {})).position[:2], 250.0)
+    assert explored_share(half) == pytest.approx(0.5) and explored_share(unexplored) == 0.0

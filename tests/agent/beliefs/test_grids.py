@@ -7,11 +7,13 @@ centralized map is their plain sum (Merino (4.4)).
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from agent.beliefs.grid_config import GridConfig
-from agent.beliefs.grids import GridExchange
+from agent.beliefs.grids import PEER_FRESH, GridExchange
 from agent.net import wire
 from perception.terrain import FlatTerrain
 
@@ -97,6 +99,11 @@ def _message(belief="logodds", **changes):
     ({"geometry": "not a geometry"}, "grid_geometry"),
     ({"acks": {"b": -1}}, "bad_field"),  # a negative acknowledgement
     ({"grid": {"mode": "key", "layers": b"\x00\x01"}}, None),  # garbage codec payload
+    ({"position": [float("nan"), 1.0]}, "bad_field"),  # the sender's position with a NaN
+    ({"position": [1.0, 2.0, 3.0]}, "bad_field"),  # three coordinates
+    ({"position": ["north", "east"]}, "bad_field"),  # words, not numbers
+    ({"position": [True, 1.0]}, "bad_field"),  # a bool, not a number
+    ({"position": 7.0}, "bad_field"),  # a number, not a pair
 ])
 def test_bad_grid_messages_are_rejected_and_change_nothing(bad, reason):
     _rejected(bad, reason)
@@ -120,7 +127,22 @@ def _rejected(bad: dict, reason: str | None, seq: int | None = None):
         assert err.value.reason == reason
     assert err.value.reason in wire.REASONS
     np.testing.assert_array_equal(receiver.mapper.grid.evidence, before)
-    assert not receiver.mapper.fusions
+    assert not receiver.mapper.fusions and not receiver.mapper.peers
+
+
+def test_a_grid_message_tells_where_its_sender_is_and_a_silent_peer_drops_out_of_the_view():
+    """The watch assignment (tasking/alarm_watch.py) needs the peers' positions: each grid message carries its
+    sender's (north, east); the receiver's view holds it until PEER_FRESH grid periods pass without a message."""
+    sender, receiver = Node("a", GridConfig(cell=10.0)), Node("b", GridConfig(cell=10.0))
+    sender.mapper.vehicle = SimpleNamespace(state=lambda: SimpleNamespace(position=np.array([12.0, -7.0, -60.0])))
+    seq, payload = sender.send(["b"])
+    assert payload["position"] == [12.0, -7.0]
+    receiver.mapper.receive("a", seq, 0.0, payload, True, 1.0)
+    receiver.mapper.now = 1.0
+    np.testing.assert_array_equal(receiver.mapper.view().peers["a"], [12.0, -7.0])
+    receiver.mapper.now = 1.0 + PEER_FRESH * receiver.mapper.config.period + 0.1
+    assert receiver.mapper.view().peers == {}
+    assert "position" not in receiver.send([])[1]  # no vehicle (a bare exchange): nothing to tell
 
 
 def test_negative_beta_counts_on_the_wire_are_rejected():
