@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.beliefs.alarm_handoff import located_alarms
+from agent.beliefs.alarm_handoff import SEPARATE_CELLS, located_alarms
 from agent.sensors.hot_spots import GATE, gate_distance
 from fusion.gaussian import Gaussian
 from fusion.grid_alarms import Alarm
@@ -65,6 +67,19 @@ def test_a_small_fires_track_inside_a_large_neighbours_gate_locates_only_its_own
     np.testing.assert_allclose(located[0]["mean"], large.mean)
 
 
+def test_an_alarm_over_two_fires_is_located_at_both_and_a_duplicate_is_not():
+    """Beta grids, seed 3 of the fire bench: one grid region held a 25-cell fire and a spot fire 18 m from its
+    centre, and the alarm was reported at the spot's track alone (18 m from the large fire). Tracks of one alarm
+    farther apart than SEPARATE_CELLS cells are separate fires; a grown duplicate near a track is not."""
+    merged = Alarm(np.array([62.0, -70.0]), np.diag([90.0, 60.0]), 0.95, 27, 0.999)
+    tracks = [(5, _track(75.0, -64.8, 0.35)),  # the spot fire
+              (8, _track(57.6, -70.1, 0.4)),  # the large fire's centre
+              (2, _track(58.4, -71.0, 1.5))]  # a stale duplicate of the large fire's track
+    located = located_alarms([merged], tracks, CELL)
+    assert [(w["track"], w["alarm"]) for w in located] == [(5, 0), (8, 0)]
+    assert np.hypot(*(located[0]["mean"] - located[1]["mean"])) > SEPARATE_CELLS * CELL
+
+
 @settings(max_examples=60, deadline=None, derandomize=True)
 @given(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50), st.floats(0.5, 30.0)), min_size=1, max_size=5),
        st.lists(st.tuples(st.floats(-60, 60), st.floats(-60, 60), st.floats(0.05, 3.0)), max_size=6))
@@ -72,14 +87,20 @@ def test_every_track_locates_at_most_one_alarm_and_only_one_whose_gate_holds_it(
     alarms = [Alarm(np.array([n, e]), var * np.eye(2), 0.9, 1, 0.95) for n, e, var in alarm_specs]
     tracks = [(k, _track(n, e, std)) for k, (n, e, std) in enumerate(track_specs)]
     located = located_alarms(alarms, tracks, CELL)
-    assert len(located) == len(alarms)
+    assert sorted({w["alarm"] for w in located}) == list(range(len(alarms)))  # every alarm is reported
     used = [w["track"] for w in located if w["track"] is not None]
     assert len(used) == len(set(used))
-    for alarm, where in zip(alarms, located, strict=True):
-        if where["track"] is None:
-            np.testing.assert_array_equal(where["mean"], alarm.mean)
+    for k, alarm in enumerate(alarms):
+        entries = [w for w in located if w["alarm"] == k]
+        if any(w["track"] is None for w in entries):  # no track: once, at the grid's mean
+            assert len(entries) == 1
+            np.testing.assert_array_equal(entries[0]["mean"], alarm.mean)
             continue
-        position = tracks[where["track"]][1].mean[:2]
-        np.testing.assert_array_equal(where["mean"], position)
-        assert gate_distance(position, alarm, CELL) <= GATE
-        assert all(gate_distance(position, alarm, CELL) <= gate_distance(position, other, CELL) for other in alarms)
+        for a, b in itertools.combinations(entries, 2):  # an alarm's tracks are separate fires
+            assert np.hypot(*(a["mean"] - b["mean"])) > SEPARATE_CELLS * CELL
+        for where in entries:  # each at its track, in this alarm's gate and deepest in it
+            position = tracks[where["track"]][1].mean[:2]
+            np.testing.assert_array_equal(where["mean"], position)
+            assert gate_distance(position, alarm, CELL) <= GATE
+            assert all(gate_distance(position, alarm, CELL) <= gate_distance(position, other, CELL)
+                       for other in alarms)
