@@ -209,7 +209,7 @@ class EntropyPlannerConfig:
     watch_from: float = 0.0  # with watch: the explored share of the area (cells of entropy < ln 2 / 2) to start at
 
     def __post_init__(self):
-        for name in ("step", "footprint", "pd", "pf", "gain_weight", "cost_weight", "turn_cost"):
+        for name in ("step", "footprint", "pd", "pf", "gain_weight", "cost_weight", "turn_cost", "watch_from"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, Real) or not math.isfinite(value):
                 raise ValueError(f"entropy planner {name} must be a finite number, got {value!r}")

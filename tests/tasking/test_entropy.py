@@ -341,6 +341,7 @@ def test_shared_map_gives_implicit_coordination(shared):
         {"explorers": True},  # a bool, not a count
         {"watch_from": 1.2},  # a share above 1
         {"watch_from": math.nan},  # NaN share
+        {"watch_from": "half"},  # a word, not a share (a TypeError before, not a clear ValueError)
     ],
 )
 def test_bad_config_raises(kwargs):
